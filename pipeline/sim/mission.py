@@ -1,0 +1,216 @@
+"""The inspection mission: one controller step after another, logged per step (DESIGN §2).
+
+Order of one step k (the discrete map of eq. 22 follows exactly this order):
+1. terms of (q_k, v_k); γ_k from s_min_G; references at guidance time τ_k;
+2. breve loop: v̆_{k+1} from v̆_k (explicit or imex); CoM loop: v_c,{k+1} from v_c,k;
+3. v_{k+1} = clip(Γ⁻¹(q_k) [v_c,{k+1}; v̆_{k+1}], ±v_max);  q_{k+1} = q_k ⊕ v_{k+1} dt;
+4. τ_{k+1} = τ_k + γ_k dt.
+Row k of the log holds the state at the start of step k and what step k computed from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+import scipy.linalg as sla
+from tqdm import tqdm
+
+from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
+from pipeline.sim import breve_controller as bc
+from pipeline.sim.base_controller import block_gains, conditioning_scale
+from pipeline.sim.base_guidance import BaseGuidance, Reference
+from pipeline.sim.com_controller import com_step
+from pipeline.sim.limits import LIMIT_FLAGS
+from pipeline.sim.robot import GiordanoRobot, Terms
+from pipeline.sim.rotations import attitude_error, quat_from_matrix
+from pipeline.sim.target import build_target, visible
+from pipeline.spec import Spec
+
+
+@dataclass
+class LoopState:
+    """What one step carries to the next."""
+
+    q: np.ndarray
+    v: np.ndarray
+    v_c: np.ndarray
+    v_breve: np.ndarray
+    tau: float = 0.0
+    integral: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    v_breve_des_prev: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class TaskErrors:
+    """x̃, J_x, v̆_des, G_vc and ẋ̃_c of one step (eq. 14)."""
+
+    x_tilde: np.ndarray
+    J_x: np.ndarray
+    v_breve_des: np.ndarray
+    G_vc: np.ndarray
+    com_vel_err: np.ndarray
+    com_pos_err: np.ndarray
+
+
+@dataclass
+class MissionResult:
+    columns: dict[str, np.ndarray]
+    status: str
+    failed_step: int | None = None
+    error: str = ""
+    warnings: list[str] = field(default_factory=list)
+
+
+def task_errors(T: Terms, ref: Reference, gamma: float, v_c: np.ndarray) -> TaskErrors:
+    """Task errors and desired reduced velocity against the references (eq. 14).
+
+    x̃ = [2ε_b; p_e − p_e,des; 2ε_e], J_x = blockdiag(E_b, R_te, E_e),
+    v̆_des = [R_bt γω_b,des; R_et γ(ṗ_e,des − ṗ_c,des); R_et γω_e,des], G_vc = [0; R_et; 0].
+    """
+    x_b, E_b = attitude_error(T.R_tb, ref.R_b)
+    x_o, E_e = attitude_error(T.R_te, ref.R_e)
+    R_et = T.R_te.T
+    J_x = np.zeros((9, 9))
+    J_x[0:3, 0:3], J_x[3:6, 3:6], J_x[6:9, 6:9] = E_b, T.R_te, E_e
+    v_des = np.concatenate([T.R_tb.T @ (gamma * ref.w_b), R_et @ (gamma * (ref.v_e - ref.v_c)),
+                            R_et @ (gamma * ref.w_e)])
+    G_vc = np.zeros((9, 3))
+    G_vc[3:6] = R_et
+    return TaskErrors(np.concatenate([x_b, T.p_e - ref.p_e, x_o]), J_x, v_des, G_vc,
+                      v_c - gamma * ref.v_c, T.p_c - ref.p_c)
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+class Mission:
+    """Robot, target and guidance of one spec, and the step that advances them."""
+
+    def __init__(self, spec: Spec, robot: GiordanoRobot | None = None):
+        self.spec = spec
+        self.robot = robot or GiordanoRobot(spec)
+        self.target = build_target(spec.target)
+        self.dt = spec.mission.dt
+        self.step_breve = bc.INTEGRATORS[spec.controller.integrator]
+        q_start = self.robot.start_configuration()
+        T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
+        self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
+        ref0 = self.guidance.reference(0.0)
+        q0 = q_start.copy()
+        q0[0:3] = ref0.p_c - ref0.R_b @ T0.p_bc
+        q0[3:7] = quat_from_matrix(ref0.R_b)
+        self.q0 = q0
+        # The CoM starts on the orbit at the orbit's speed (the bus was inserted into it),
+        # with the arm and bus at rest relative to it.
+        gamma0 = conditioning_scale(T0.s_min_G, spec.controller)
+        self.v_c0 = gamma0 * ref0.v_c
+
+    def initial_state(self) -> LoopState:
+        nv = self.robot.model.nv
+        T0 = self.robot.terms(self.q0, np.zeros(nv), dynamics=False)
+        v_c0 = self.v_c0.copy()
+        v0 = T0.gamma_inv @ np.concatenate([v_c0, np.zeros(9)])
+        return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(9))
+
+    def breve_rhs(self, T: Terms, err: TaskErrors, K: np.ndarray, D: np.ndarray,
+                  s: LoopState, v_breve_dot_des: np.ndarray) -> np.ndarray:
+        """RHS of eq. 13: the sum of its named terms."""
+        C_b, M_b = T.reduced_coriolis, T.reduced_inertia
+        return (bc.coriolis_term(C_b, s.v_breve)
+                + bc.damping_term(D, s.v_breve, err.v_breve_des)
+                + bc.stiffness_term(err.J_x, K, err.x_tilde)
+                + bc.com_coupling_term(T.com_coupling, D, err.G_vc, err.com_vel_err)
+                + bc.posture_term(T.gamma_inv, self.spec.controller.gains.posture,
+                                  s.q[7:], self.robot.q_bar)
+                + bc.feedforward_term(M_b, v_breve_dot_des, C_b, err.v_breve_des))
+
+    def step(self, s: LoopState) -> tuple[LoopState, dict]:
+        """One controller step from state ``s``: the next state and the row to log."""
+        ctrl, dt = self.spec.controller, self.dt
+        T = self.robot.terms(s.q, s.v)
+        gamma = conditioning_scale(T.s_min_G, ctrl)
+        ref = self.guidance.reference(s.tau, T.p_b)
+        err = task_errors(T, ref, gamma, s.v_c)
+        K, D = block_gains(ctrl, gamma)
+        M_b = T.reduced_inertia
+        prev = s.v_breve_des_prev
+        v_dot_des = np.zeros(9) if prev is None else (err.v_breve_des - prev) / dt
+        rhs = self.breve_rhs(T, err, K, D, s, v_dot_des)
+        mu_max = float(sla.eigh(D, M_b, eigvals_only=True)[-1])
+
+        if ctrl.integrator == "imex":
+            v_breve, flags = self.step_breve(M_b, D, rhs, s.v_breve, dt, ctrl.limits)
+        else:
+            v_breve, flags = self.step_breve(M_b, rhs, s.v_breve, dt, ctrl.limits)
+        com = com_step(err.com_pos_err, err.com_vel_err, s.v_c, gamma**2 * ref.a_c, s.integral,
+                       ctrl.com, ctrl.limits, dt)
+        v_raw = T.gamma_inv @ np.concatenate([com.v_c, v_breve])
+        v_max = ctrl.limits.v_max
+        v_new = np.clip(v_raw, -v_max, v_max)
+        flags |= {"sat_v_c_acc": com.sat_acc, "sat_v_c_rate": com.sat_rate,
+                  "sat_v_max": bool(np.any(np.abs(v_raw) > v_max))}
+
+        row = {
+            "tau": s.tau, "q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve,
+            "v_breve_des": err.v_breve_des, "x_tilde": err.x_tilde,
+            "s_min_G": T.s_min_G, "kappa_G": T.kappa_G, "s_min_J": T.s_min_J,
+            "kappa_J": T.kappa_J, "gamma": gamma, "dt_mu_max": dt * mu_max,
+            "pointing_err_deg": angle_deg(T.R_tb[:, 2], -T.p_b),
+            "boresight_err_deg": angle_deg(T.R_te[:, 2], ref.aim - T.p_e),
+            "com_err": float(np.linalg.norm(err.com_pos_err)),
+            "_p_e": T.p_e, "_R_te": T.R_te, **flags,
+        }
+        q_new = pin.integrate(self.robot.model, s.q, v_new * dt)
+        nxt = LoopState(q=q_new, v=v_new, v_c=com.v_c, v_breve=v_breve,
+                        tau=s.tau + gamma * dt, integral=com.integral,
+                        v_breve_des_prev=err.v_breve_des)
+        return nxt, row
+
+    def run(self, progress: bool = False) -> MissionResult:
+        """Run every step; a non-finite state ends the run with status ``failed``."""
+        n = self.spec.n_steps
+        cols = {c: np.zeros((n, w)) for c, w in VECTOR_COLUMNS.items()}
+        cols |= {c: np.zeros(n) for c in SCALAR_COLUMNS}
+        cols |= {c: np.zeros(n, dtype=bool) for c in LIMIT_FLAGS}
+        cols["step"] = np.arange(n, dtype=np.int64)
+        cols["t"] = np.arange(n) * self.dt
+        seen = np.zeros(len(self.target.points), dtype=bool)
+        s = self.initial_state()
+        warned: list[str] = []
+        with tqdm(total=n, disable=not progress, unit="step", mininterval=0.5,
+                  desc=self.spec.name) as bar:
+            for k in range(n):
+                try:
+                    with np.errstate(all="raise"):
+                        s_next, row = self.step(s)
+                    finite = all(np.all(np.isfinite(x)) for x in
+                                 (s_next.q, s_next.v, s_next.v_breve, s_next.v_c))
+                except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                    finite, why = False, f"{type(exc).__name__}: {exc}"
+                else:
+                    why = "non-finite state"
+                if not finite:
+                    cut = {c: a[:k] for c, a in cols.items()}
+                    return MissionResult(cut, "failed", k, f"step {k}: {why}", warned)
+                seen |= visible(self.target, row.pop("_p_e"), row.pop("_R_te"), self.spec.camera)
+                row["coverage"] = float(seen.mean())
+                for c, val in row.items():
+                    cols[c][k] = val
+                if (not warned and self.spec.controller.integrator == "explicit"
+                        and row["dt_mu_max"] > 2):
+                    warned.append(stability_warning(k, row["dt_mu_max"], self.dt))
+                s = s_next
+                bar.update()
+        return MissionResult(cols, "complete", warnings=warned)
+
+
+def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:
+    """The online guard's one message (eq. 21): name the bound and both fixes."""
+    dt_star = 2 * dt / dt_mu_max
+    return (f"step {step}: dt·μ_max = {dt_mu_max:.3g} > 2 under the explicit integrator: the "
+            f"velocity damping is period-2 unstable (forward Euler). Fix: set "
+            f"controller.integrator: imex, or mission.dt below dt* = 2/μ_max = {dt_star:.4g} s")

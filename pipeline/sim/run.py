@@ -1,0 +1,48 @@
+"""Run one spec into its Parquet log: ``DIR/<spec name>/run.parquet`` (DESIGN §6)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from pipeline.errors import RunFailed
+from pipeline.logs import LogMeta, log_metadata, write_table
+from pipeline.sim.mission import Mission
+from pipeline.spec import SPECS_DIR, Spec, file_hash
+from pipeline.version import code_version
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    path: Path
+    status: str
+    n_steps: int
+    warnings: list[str]
+    error: str = ""
+
+
+def log_path(spec: Spec, out_dir: Path) -> Path:
+    return Path(out_dir) / spec.name / "run.parquet"
+
+
+def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
+             raise_on_failure: bool = True) -> RunOutcome:
+    """Simulate ``spec`` and write its log atomically; a diverged run is logged as failed.
+
+    Raises RunFailed (after writing the failed log) unless ``raise_on_failure`` is false.
+    """
+    result = Mission(spec).run(progress=progress)
+    meta = LogMeta(
+        spec=spec.model_dump(mode="json"), spec_hash=spec.spec_hash,
+        code_version=code_version(),
+        robot_file=str(spec.robot_path.relative_to(SPECS_DIR.parent)),
+        robot_hash=file_hash(spec.robot_path), status=result.status,
+        failed_step=result.failed_step, error=result.error,
+    )
+    path = log_path(spec, Path(out_dir))
+    write_table(path, result.columns, log_metadata(meta))
+    outcome = RunOutcome(path, result.status, len(result.columns["step"]), result.warnings,
+                         result.error)
+    if result.status != "complete" and raise_on_failure:
+        raise RunFailed(f"{spec.name}: run failed at {result.error}; log marked failed: {path}")
+    return outcome

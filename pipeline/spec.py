@@ -1,0 +1,334 @@
+"""Mission specs: YAML files under ``specs/`` loaded into one validated, resolved object.
+
+A spec may ``extends:`` another spec by name (looked up beside it, then in the project's
+``specs/``); the child's keys override the parent's, mappings merging recursively. The
+resolved spec is hashed canonically: the same content gives the same hash whatever the key
+order or the file it came from (the name and ``extends`` are not part of the content).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from pipeline.errors import SpecError
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+SPECS_DIR = PROJECT_ROOT / "specs"
+_NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+PositiveInt = Annotated[int, Field(gt=0)]
+
+
+class _Block(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class DampedInverse(_Block):
+    """Damped SVD pseudo-inverse of J⊕ (eq. 6): damping fades in below ``floor``."""
+
+    floor: Positive = 0.02
+    damping: Positive = 0.02
+
+
+class RobotSpec(_Block):
+    urdf: str = "robots/servicer_ur3.urdf"
+    camera_frame: str = "camera"
+    # Nominal arm posture q̄ (rad): camera boresight along the bus +z axis, elbow bent 1 rad
+    # so the arm keeps reach margin (σ_min(Γ) ≈ 0.08); closer to straight, a few cm of CoM
+    # error already drive J⊕ singular (see the note on issue 3).
+    q_bar: list[Finite] = Field(default=[0.0, -1.6, 1.0, -0.95, 1.5708, 0.0])
+    damped_inverse: DampedInverse = DampedInverse()
+
+    @field_validator("q_bar")
+    @classmethod
+    def _six(cls, v: list[float]) -> list[float]:
+        if len(v) != 6:
+            raise ValueError(f"needs 6 joint angles, got {len(v)}")
+        return v
+
+
+class Ramp(_Block):
+    """The γ ramp's knobs (eq. 20): σ <= low → floor, σ >= high → 1."""
+
+    low: NonNegative = 0.01
+    high: Positive = 0.05
+    floor: Fraction = 0.3
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Ramp:
+        if not self.low < self.high:
+            raise ValueError(f"low ({self.low}) must be below high ({self.high})")
+        return self
+
+
+class SamplingDefault(_Block):
+    step_size: Positive = 0.05
+    num: PositiveInt = 32
+
+
+class ConfigSampling(_Block):
+    """Startup configuration sampler (not the runtime derate ``controller.base.conditioning``)."""
+
+    seed: int = 0
+    default: SamplingDefault = SamplingDefault()
+    low: NonNegative = 0.01
+    high: Positive = 0.05
+    floor: Fraction = 0.3
+
+
+class BlockGain(_Block):
+    K: NonNegative
+    D: Positive
+
+
+class Gains(_Block):
+    """Block gains K̆, D̆ (eq. 13): bus attitude, camera position, camera orientation."""
+
+    bus: BlockGain = BlockGain(K=2.0, D=2.0)
+    cam_pos: BlockGain = BlockGain(K=4.0, D=8.0)
+    cam_ori: BlockGain = BlockGain(K=1.0, D=1.0)
+    posture: NonNegative = 0.0
+
+
+class ComGains(_Block):
+    """CoM loop gains (eq. 12), per unit mass (s⁻², s⁻¹, s⁻³) and the integral bound (m·s)."""
+
+    K: NonNegative = 0.01
+    D: Positive = 0.2
+    Ki: NonNegative = 0.0
+    i_max: NonNegative = 1.0
+
+
+class Derate(_Block):
+    gain: bool = False
+
+
+class BaseBlock(_Block):
+    conditioning: Ramp = Ramp()
+    derate: Derate = Derate()
+
+
+class Limits(_Block):
+    """Rate and acceleration saturations (rad/s, m/s, and per second) and the clip v_max."""
+
+    omega_b_rate: Positive = 0.5
+    omega_b_acc: Positive = 2.0
+    nu_e_lin_rate: Positive = 0.5
+    nu_e_lin_acc: Positive = 5.0
+    nu_e_ang_rate: Positive = 1.0
+    nu_e_ang_acc: Positive = 10.0
+    v_c_rate: Positive = 0.2
+    v_c_acc: Positive = 0.05
+    v_max: Positive = 50.0
+
+
+class Controller(_Block):
+    integrator: Literal["explicit", "imex"] = "explicit"
+    gains: Gains = Gains()
+    com: ComGains = ComGains()
+    base: BaseBlock = BaseBlock()
+    limits: Limits = Limits()
+
+
+class Mission(_Block):
+    dt: Positive = 0.03
+    duration: Positive = 60.0
+
+
+class Guidance(_Block):
+    """Inspection orbit of the CoM about the target and the camera's aim pattern."""
+
+    orbit_radius: Positive = 6.0
+    orbit_period: Positive = 900.0
+    orbit_phase_deg: Finite = 0.0
+    aim_amplitude: NonNegative = 0.5
+    aim_period: Positive = 40.0
+
+
+class Target(_Block):
+    bus_size: list[Positive] = Field(default=[1.2, 1.2, 1.5])
+    panel_span: Positive = 2.5
+    panel_width: Positive = 1.0
+    n_points: PositiveInt = 1500
+    seed: int = 7
+
+    @field_validator("bus_size")
+    @classmethod
+    def _three(cls, v: list[float]) -> list[float]:
+        if len(v) != 3:
+            raise ValueError(f"needs 3 sizes, got {len(v)}")
+        return v
+
+
+class Camera(_Block):
+    fov_deg: Annotated[float, Field(gt=0, lt=180, allow_inf_nan=False)] = 40.0
+    d_min: Positive = 0.5
+    d_max: Positive = 10.0
+    max_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)] = 75.0
+
+
+class Spec(_Block):
+    """One resolved mission spec."""
+
+    name: str
+    description: str = ""
+    robot: RobotSpec = RobotSpec()
+    mission: Mission = Mission()
+    controller: Controller = Controller()
+    guidance: Guidance = Guidance()
+    target: Target = Target()
+    camera: Camera = Camera()
+    config_sampling: ConfigSampling = ConfigSampling()
+
+    @property
+    def robot_path(self) -> Path:
+        return SPECS_DIR / self.robot.urdf
+
+    def content(self) -> dict[str, Any]:
+        """The spec's content: everything but its name."""
+        d = self.model_dump(mode="json")
+        d.pop("name")
+        d.pop("description")
+        return d
+
+    @property
+    def spec_hash(self) -> str:
+        return canonical_hash(self.content())
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.mission.duration / self.mission.dt))
+
+
+def canonical_hash(obj: Any) -> str:
+    """SHA-256 of the canonical JSON form (sorted keys, no whitespace)."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def file_hash(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def deep_merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = deep_merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def resolve_spec_path(spec: str | Path) -> Path:
+    """A spec argument is a path to a YAML file, or a bare name under ``specs/``."""
+    p = Path(spec)
+    if p.suffix in (".yaml", ".yml"):
+        if not p.is_file():
+            raise SpecError(f"{p}: spec file not found")
+        return p
+    return _named_spec(str(spec), SPECS_DIR, Path("spec argument"))
+
+
+def _named_spec(name: str, here: Path, referrer: Path) -> Path:
+    if not _NAME_RE.match(name) or name.startswith("."):
+        raise SpecError(f"{referrer}: spec name {name!r} escapes specs/ (use a bare name)")
+    for folder in (here, SPECS_DIR):
+        cand = folder / f"{name}.yaml"
+        if cand.is_file():
+            return cand
+    where = SPECS_DIR if here == SPECS_DIR else f"{here} or {SPECS_DIR}"
+    raise SpecError(f"{referrer}: spec {name!r} not found in {where}")
+
+
+def _read_yaml(path: Path) -> dict:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise SpecError(f"{path}: broken YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    except OSError as exc:
+        raise SpecError(f"{path}: cannot read spec: {exc.strerror}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise SpecError(f"{path}: a spec must be a mapping, got {type(data).__name__}")
+    return data
+
+
+def raw_spec(path: Path, _chain: tuple[Path, ...] = ()) -> dict:
+    """The merged raw mapping of a spec and its ``extends`` chain."""
+    path = path.resolve()
+    if path in _chain:
+        cycle = " -> ".join(p.stem for p in (*_chain, path))
+        raise SpecError(f"{path}: cycle in extends: {cycle}")
+    data = _read_yaml(path)
+    parent = data.pop("extends", None)
+    if parent is None:
+        return data
+    if not isinstance(parent, str):
+        raise SpecError(f"{path}: field extends: must be a spec name")
+    parent_path = _named_spec(parent, path.parent, path)
+    return deep_merge(raw_spec(parent_path, (*_chain, path)), data)
+
+
+def build_spec(name: str, data: dict, source: Path | str) -> Spec:
+    """Validate a raw mapping into a Spec; errors name the field and the source."""
+    try:
+        spec = Spec.model_validate({**data, "name": name})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        field = ".".join(str(x) for x in err["loc"]) or "<root>"
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        raise SpecError(f"{source}: field {field}: {msg}") from None
+    _check_robot(spec, source)
+    return spec
+
+
+def _check_robot(spec: Spec, source: Path | str) -> None:
+    root = SPECS_DIR.resolve()
+    p = (SPECS_DIR / spec.robot.urdf).resolve()
+    if root not in p.parents:
+        raise SpecError(f"{source}: field robot.urdf: {spec.robot.urdf!r} escapes specs/")
+    if not p.is_file():
+        raise SpecError(f"{source}: field robot.urdf: robot file {p} not found")
+
+
+def load_spec(spec: str | Path) -> Spec:
+    """Load, merge (``extends``) and validate a spec by path or name."""
+    path = resolve_spec_path(spec)
+    return build_spec(path.stem, raw_spec(path), path)
+
+
+def with_overrides(spec: Spec, overrides: dict[str, Any], name: str | None = None) -> Spec:
+    """A copy of ``spec`` with dotted-key overrides (``mission.dt``), validated again."""
+    data = spec.model_dump(mode="json")
+    data.pop("name")
+    for key, value in overrides.items():
+        node = data
+        parts = key.split(".")
+        for part in parts[:-1]:
+            if not isinstance(node.get(part), dict):
+                raise SpecError(f"--set {key}: unknown key {part!r}")
+            node = node[part]
+        if parts[-1] not in node:
+            raise SpecError(f"--set {key}: unknown key {parts[-1]!r}")
+        node[parts[-1]] = value
+    return build_spec(name or spec.name, data, f"--set on {spec.name}")
+
+
