@@ -1,0 +1,41 @@
+"""``python -m pipeline analyze``: analysis.json and the per-direction table of one log."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.analysis.stages import analyze_log, compare
+from pipeline.logs import atomic_write_text, write_table
+
+
+def write_analysis(record: dict, out_dir: Path) -> Path:
+    """Write ``out_dir/<spec name>/analysis.json`` and ``directions.parquet`` atomically."""
+    folder = Path(out_dir) / record["spec_name"]
+    table = {k: np.array([d[k] for d in record["directions"]]) for k in record["directions"][0]}
+    write_table(folder / "directions.parquet", table, {"pipeline.log": record["log"]})
+    path = folder / "analysis.json"
+    atomic_write_text(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
+    return path
+
+
+def analyze_command(log: Path, against: Path | None, out: Path,
+                    window_start: float | None = None) -> int:
+    record = analyze_log(log, window_start)
+    if against is not None:
+        record["comparison"] = compare(record, analyze_log(against, window_start))
+    path = write_analysis(record, out)
+    th, dom = record["theory"], record["dominant"]
+    print(f"{record['spec_name']}: dominant lag-1 {dom['lag1']:+.3f} (σ {dom['sigma']:.3g}), "
+          f"dt·μ_max {th['dt_mu_max']:.3g}, dt* {th['dt_star']:.4g} s, dominant eigenvalue "
+          f"{th['eig_dominant']['real']:+.3f}{th['eig_dominant']['imag']:+.3f}j, "
+          f"|cos| {record['alignment']['abs_cos']:.3f}, median ‖Δv‖ "
+          f"{record['velocity_jump']['median']:.3g}, provenance "
+          f"{record['provenance']['max_abs_s_min_G']:.1e} -> {path}")
+    if "comparison" in record:
+        c = record["comparison"]
+        print(f"  vs {c['against']}: lag-1 flip {c['lag1_flip']}, ‖Δv‖ ratio "
+              f"{c['amplitude_ratio']:.3g}, coverage difference {c['coverage_diff_pp']:.2f} pp")
+    return 0

@@ -1,0 +1,121 @@
+"""Theory at one step: damping-mode rates, critical step and the 18×18 discrete map (eqs. 21–24).
+
+The map linearises the attitude-and-camera loop about a rest state (v̆ = v̆_des, x̃ = 0,
+saturations inactive, γ constant) for the simulator's update order: v̆ first, then q moves
+with the new velocity, so x̃⁺ = x̃ + dt J_x e⁺. With z = [x̃; e], e = v̆ − v̆_des:
+
+    explicit:  A_e = I − dt M̆⁻¹D̆,         B = −dt M̆⁻¹ K_x
+    imex:      A_e = (M̆ + dt D̆)⁻¹ M̆,      B = −dt (M̆ + dt D̆)⁻¹ K_x
+    Φ = [[I + dt J_x B, dt J_x A_e], [B, A_e]],   K_x = J_xᵀ K̆ + K_posture
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+
+def damping_rates(M_breve: np.ndarray, D_breve: np.ndarray) -> np.ndarray:
+    """μ = eig(M̆⁻¹D̆), ascending: the generalised eigenvalues of (D̆, M̆) (eq. 21)."""
+    return sla.eigh(D_breve, M_breve, eigvals_only=True)
+
+
+def critical_step(mu_max: float) -> float:
+    """dt* = 2/μ_max: forward Euler on the damping is stable iff dt < dt* (eq. 24)."""
+    return 2.0 / mu_max
+
+
+def amplification(dt: float, mu: np.ndarray, integrator: str) -> np.ndarray:
+    """Per-mode multiplier: ρ = 1 − dt μ (explicit), 1/(1 + dt μ) (imex) (eq. 23)."""
+    mu = np.asarray(mu, dtype=float)
+    return 1.0 - dt * mu if integrator == "explicit" else 1.0 / (1.0 + dt * mu)
+
+
+def regime(dt_mu: float) -> str:
+    """Forward-Euler regime of one mode from dt·μ (eq. 23)."""
+    if dt_mu < 1:
+        return "monotone decay"
+    if dt_mu < 2:
+        return "decaying 2-cycle"
+    if dt_mu == 2:
+        return "marginal period-2"
+    return "growing period-2"
+
+
+def discrete_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
+                 dt: float, integrator: str) -> np.ndarray:
+    """Φ, the 18×18 map z⁺ = Φ z of the linearised loop (eq. 22)."""
+    n = M_breve.shape[0]
+    if integrator == "explicit":
+        A_e = np.eye(n) - dt * np.linalg.solve(M_breve, D_breve)
+        B = -dt * np.linalg.solve(M_breve, K_x)
+    elif integrator == "imex":
+        W = M_breve + dt * D_breve
+        A_e = np.linalg.solve(W, M_breve)
+        B = -dt * np.linalg.solve(W, K_x)
+    else:
+        raise ValueError(f"unknown integrator {integrator!r}")
+    return np.block([[np.eye(n) + dt * J_x @ B, dt * J_x @ A_e], [B, A_e]])
+
+
+@dataclass(frozen=True)
+class MapSpectrum:
+    eigenvalues: np.ndarray
+    dominant: complex
+    spectral_radius: float
+    dominant_vector: np.ndarray  # eigenvector of the dominant eigenvalue (18)
+
+
+def spectrum(Phi: np.ndarray) -> MapSpectrum:
+    """Eigenvalues of Φ, its dominant one (largest modulus) and its eigenvector."""
+    w, V = np.linalg.eig(Phi)
+    i = int(np.argmax(np.abs(w)))
+    return MapSpectrum(w, complex(w[i]), float(abs(w[i])), V[:, i])
+
+
+def bisect_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
+                         lo: float = 1e-6, hi: float = 1.0, tol: float = 1e-10) -> float | None:
+    """Smallest dt in [lo, hi] with spectral radius of Φ(dt) reaching 1, by bisection.
+
+    Assumes ρ(Φ(lo)) < 1 (a stable small step); returns None if ρ(Φ(hi)) < 1 (no bound in
+    range, as for imex). The radius crosses 1 once on this bracket for a damped loop.
+    """
+    def radius(dt: float) -> float:
+        return spectrum(discrete_map(M_breve, D_breve, K_x, J_x, dt, integrator)).spectral_radius
+
+    if radius(hi) < 1.0:
+        return None
+    if radius(lo) >= 1.0:
+        return lo
+    while hi - lo > tol * hi:
+        mid = 0.5 * (lo + hi)
+        if radius(mid) < 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def attitude_jacobian(x_att: np.ndarray) -> np.ndarray:
+    """E = η I + [ε]× from a logged attitude error x̃ = 2ε, η = √(1 − ‖ε‖²) (eq. 14)."""
+    eps = 0.5 * np.asarray(x_att, dtype=float)
+    eta = np.sqrt(max(0.0, 1.0 - eps @ eps))
+    return eta * np.eye(3) + np.array([[0, -eps[2], eps[1]], [eps[2], 0, -eps[0]],
+                                       [-eps[1], eps[0], 0]])
+
+
+def task_jacobian(x_tilde: np.ndarray, R_te: np.ndarray) -> np.ndarray:
+    """J_x = blockdiag(E_b, R_te, E_e) from the logged x̃ and the rebuilt R_te (eq. 14)."""
+    J = np.zeros((9, 9))
+    J[0:3, 0:3] = attitude_jacobian(x_tilde[0:3])
+    J[3:6, 3:6] = R_te
+    J[6:9, 6:9] = attitude_jacobian(x_tilde[6:9])
+    return J
+
+
+def posture_stiffness(gamma_inv: np.ndarray, k_posture: float, J_x: np.ndarray) -> np.ndarray:
+    """Posture spring in x̃ coordinates: (Γ⁻¹[6:, 3:])ᵀ k Γ⁻¹[6:, 3:] J_x⁻¹ (eq. 13e, 22)."""
+    P = gamma_inv[6:, 3:]
+    return k_posture * P.T @ P @ np.linalg.inv(J_x)
