@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-
 import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -209,7 +208,7 @@ class Spec(_Block):
 
     @property
     def n_steps(self) -> int:
-        return int(round(self.mission.duration / self.mission.dt))
+        return round(self.mission.duration / self.mission.dt)
 
 
 def canonical_hash(obj: Any) -> str:

@@ -15,13 +15,15 @@ from pipeline.sim.robot import GiordanoRobot
 
 
 def rebuild_gamma(robot: GiordanoRobot, q: np.ndarray) -> np.ndarray:
-    """Γ(q_k) for every row of q (N×13) → N×12×12, one Pinocchio pass per step."""
-    zero = np.zeros(robot.model.nv)
-    return np.stack([robot.terms(qk, zero, dynamics=False).gamma for qk in q])
+    """Γ(q_k) for every row of q (N×13) → N×12×12 (eq. 26), by the simulator's own code."""
+    out = np.empty((len(q), 12, 12))
+    for k, qk in enumerate(q):
+        out[k] = robot.gamma_matrix_at(qk)
+    return out
 
 
 def sign_continuous(V: np.ndarray, previous: np.ndarray | None = None) -> np.ndarray:
-    """Flip each singular vector (columns of V[k]) to keep v_i,k · v_i,k−1 >= 0.
+    """Flip each singular vector (columns of V[k]) to keep v_i,k · v_i,k−1 >= 0 (eq. 26).
 
     V is N×n×n (right-singular vectors as columns); ``previous`` is the last n×n of the
     preceding chunk, so continuity holds across row groups. The flips compose along time,

@@ -1,10 +1,10 @@
 """Finite-difference linearisation of the simulator's own step, to check the map Φ (eq. 22).
 
 The simulator is put at a rest steady state: a static reference equal to the start pose and
-the posture spring's q̄ at the start posture, so x̃ = 0 and e = v̆ − v̆_des = 0 there. Each coordinate of z = [x̃; e] is perturbed by ±h
-(x̃ through a configuration change that keeps the CoM fixed, δθ = Γ⁻¹ [0; J_x⁻¹ δx̃]) and one
-``Mission.step`` is taken; the central differences give ∂z⁺/∂z, to compare with
-``theory.discrete_map`` at the same state.
+the posture spring's q̄ at the start posture, so x̃ = 0 and e = v̆ − v̆_des = 0 there.
+Each coordinate of z = [x̃; e] is perturbed by ±h (x̃ through a configuration change that
+keeps the CoM fixed, δθ = Γ⁻¹ [0; J_x⁻¹ δx̃]) and one ``Mission.step`` is taken; the central
+differences give ∂z⁺/∂z, to compare with ``theory.discrete_map`` at the same state.
 """
 
 from __future__ import annotations

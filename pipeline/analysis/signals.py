@@ -1,4 +1,4 @@
-"""Scalar-signal statistics of the analysis: lag-1 autocorrelation, RMS, step jumps (eqs. 25, 28).
+"""Signal statistics of the analysis: lag-1, RMS, step jumps, directions (eqs. 25–28).
 
 Pure functions of arrays; each works along axis 0 (time) and accepts N or N×k inputs.
 """
@@ -28,7 +28,7 @@ def rms(x: np.ndarray) -> np.ndarray:
 
 
 def step_rms(x: np.ndarray) -> np.ndarray:
-    """RMS of the step-to-step change x_{k+1} − x_k along axis 0."""
+    """RMS of the step-to-step change x_{k+1} − x_k along axis 0 (step energy, eq. 26)."""
     return rms(np.diff(np.asarray(x, dtype=float), axis=0))
 
 
@@ -38,7 +38,7 @@ def velocity_jumps(v: np.ndarray) -> np.ndarray:
 
 
 def dominant_step_direction(x: np.ndarray) -> np.ndarray:
-    """Unit direction of most step-to-step energy: first right-singular vector of Δx."""
+    """Unit direction of most step-to-step energy: first right-singular vector of Δx (eq. 27)."""
     d = np.diff(np.asarray(x, dtype=float), axis=0)
     _, _, Vt = np.linalg.svd(d, full_matrices=False)
     return Vt[0]

@@ -43,7 +43,7 @@ def spec_of_log(path, meta) -> Spec:
 def choose_window(n: int, dt: float, window_start: float | None) -> Window:
     if window_start is None:
         return Window(n // 2, n, "second half of the mission (after start-up transients)")
-    start = int(round(window_start / dt))
+    start = round(window_start / dt)
     if window_start < 0 or n - start < 3:
         raise LogError(f"window start {window_start} s leaves fewer than 3 steps of a "
                        f"{n * dt:g} s log")
@@ -62,24 +62,12 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(spec)
 
-    # Stage 1 and 2: rebuild Γ at every step (streamed by row group), project in the window.
-    worst, worst_step, worst_kappa = 0.0, -1, 0.0
-    ys, sigmas, V_prev = [], [], None
-    for chunk in iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"]):
-        part = project_chunk(rebuild_gamma(robot, chunk["q"]), chunk["v"], V_prev)
-        V_prev = part.V_last
-        diff = np.abs(part.s_min - chunk["s_min_G"])
-        if diff.size and diff.max() > worst:
-            worst, worst_step = float(diff.max()), int(chunk["step"][np.argmax(diff)])
-        rel_k = np.abs(part.kappa - chunk["kappa_G"]) / chunk["kappa_G"]
-        worst_kappa = max(worst_kappa, float(rel_k.max(initial=0.0)))
-        keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
-        ys.append(part.y[keep])
-        sigmas.append(part.sigma[keep])
-    if check and worst > PROVENANCE_TOL:
+    # Stages 1 and 2: Γ rebuilt at every step, velocity projected in the window.
+    prov, y, sigma = rebuild_and_project(robot, path, win)
+    if check and prov["max_abs_s_min_G"] > PROVENANCE_TOL:
         raise CheckFailed(f"{path}: provenance: rebuilt σ_min(Γ) differs from logged s_min_G "
-                          f"by {worst:.3e} at step {worst_step} (tolerance {PROVENANCE_TOL:g})")
-    y, sigma = np.concatenate(ys), np.concatenate(sigmas)
+                          f"by {prov['max_abs_s_min_G']:.3e} at step {prov['worst_step']} "
+                          f"(tolerance {PROVENANCE_TOL:g})")
 
     # Stage 3: per-direction statistics and the dominant direction.
     lag1 = signals.lag1_autocorrelation(y)
@@ -103,8 +91,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         "code_version": meta.code_version, "integrator": spec.controller.integrator,
         "dt": dt, "n_steps": n,
         "window": {"start_step": win.start, "stop_step": win.stop, "rule": win.rule},
-        "provenance": {"max_abs_s_min_G": worst, "worst_step": worst_step,
-                       "max_rel_kappa_G": worst_kappa, "tolerance": PROVENANCE_TOL},
+        "provenance": prov,
         "directions": directions,
         "dominant": {"index": dom, "sigma": directions[dom]["sigma"],
                      "lag1": directions[dom]["lag1"], "step_rms": directions[dom]["step_rms"],
@@ -118,8 +105,31 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     }
 
 
+def rebuild_and_project(robot: GiordanoRobot, path, win: Window
+                        ) -> tuple[dict, np.ndarray, np.ndarray]:
+    """Stages 1–2, streamed by row group: provenance over every step, and the projections
+    y (eq. 26) and singular values of Γ over the window."""
+    worst, worst_step, worst_kappa = 0.0, -1, 0.0
+    ys, sigmas, V_prev = [], [], None
+    for chunk in iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"]):
+        part = project_chunk(rebuild_gamma(robot, chunk["q"]), chunk["v"], V_prev)
+        V_prev = part.V_last
+        diff = np.abs(part.s_min - chunk["s_min_G"])
+        if diff.size and diff.max() > worst:
+            worst, worst_step = float(diff.max()), int(chunk["step"][np.argmax(diff)])
+        rel_k = np.abs(part.kappa - chunk["kappa_G"]) / chunk["kappa_G"]
+        worst_kappa = max(worst_kappa, float(rel_k.max(initial=0.0)))
+        keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
+        ys.append(part.y[keep])
+        sigmas.append(part.sigma[keep])
+    prov = {"max_abs_s_min_G": worst, "worst_step": worst_step, "max_rel_kappa_G": worst_kappa,
+            "tolerance": PROVENANCE_TOL}
+    return prov, np.concatenate(ys), np.concatenate(sigmas)
+
+
 def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
-    """Stage 4 at step k: μ, dt·μ_max, dt*, Φ for both integrators, the dominant mode."""
+    """Stage 4 at step k: μ, dt·μ_max, dt*, Φ for both integrators, the dominant mode
+    (eqs. 21–24) and its velocity direction for the alignment (eq. 27)."""
     row = read_columns(path, ["q", "v", "x_tilde", "s_min_G"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, spec.controller)

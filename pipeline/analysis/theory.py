@@ -14,12 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
-
-def damping_rates(M_breve: np.ndarray, D_breve: np.ndarray) -> np.ndarray:
-    """μ = eig(M̆⁻¹D̆), ascending: the generalised eigenvalues of (D̆, M̆) (eq. 21)."""
-    return sla.eigh(D_breve, M_breve, eigvals_only=True)
+from pipeline.sim.breve_controller import damping_rates  # noqa: F401  (μ, eq. 21)
 
 
 def critical_step(mu_max: float) -> float:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.sim.jit import jit
 from pipeline.sim.limits import saturate_breve
 from pipeline.spec import Limits
 
@@ -66,10 +67,23 @@ def imex_step(M_breve: np.ndarray, D_breve: np.ndarray, rhs: np.ndarray, v_breve
     The implicit solution defines an acceleration (v̆⁺ − v̆)/dt that passes through the same
     acceleration and rate saturations as the explicit step.
     """
-    v_raw = np.linalg.solve(M_breve + dt * D_breve, M_breve @ v_breve + dt * (rhs + D_breve @ v_breve))
+    v_raw = np.linalg.solve(M_breve + dt * D_breve,
+                            M_breve @ v_breve + dt * (rhs + D_breve @ v_breve))
     acc, f_acc = saturate_breve((v_raw - v_breve) / dt, lim, "acc")
     v_new, f_rate = saturate_breve(v_breve + dt * acc, lim, "rate")
     return v_new, f_acc | f_rate
 
 
 INTEGRATORS = {"explicit": explicit_step, "imex": imex_step}
+
+
+@jit
+def damping_rates(M_breve: np.ndarray, D_breve: np.ndarray) -> np.ndarray:
+    """μ = eig(M̆⁻¹D̆), ascending (eq. 21): with M̆ = L Lᵀ, the eigenvalues of L⁻¹ D̆ L⁻ᵀ.
+
+    M̆ is symmetric positive definite, so M̆⁻¹D̆ is similar to that symmetric matrix and its
+    eigenvalues, the damping-mode decay rates, are real.
+    """
+    L_inv = np.linalg.inv(np.linalg.cholesky(np.ascontiguousarray(M_breve)))
+    S = L_inv @ np.ascontiguousarray(D_breve) @ L_inv.T
+    return np.linalg.eigvalsh(0.5 * (S + S.T))

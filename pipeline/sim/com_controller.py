@@ -24,7 +24,7 @@ def com_step(x_c: np.ndarray, xd_c: np.ndarray, v_c: np.ndarray, a_ff: np.ndarra
 
     Gains are per unit mass; the integral is bounded componentwise by ``i_max``.
     """
-    integral = np.clip(integral + dt * x_c, -gains.i_max, gains.i_max)
+    integral = np.minimum(np.maximum(integral + dt * x_c, -gains.i_max), gains.i_max)
     acc = -gains.K * x_c - gains.D * xd_c - gains.Ki * integral + a_ff
     acc, f_acc = saturate(acc, lim.v_c_acc)
     v_new, f_rate = saturate(v_c + dt * acc, lim.v_c_rate)

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
+from pipeline.sim.jit import jit
 from pipeline.spec import Limits
 
 # Blocks of v̆ = [ω_b; ν_e,lin; ν_e,ang] and the limit names that bound each.
@@ -14,18 +17,35 @@ LIMIT_FLAGS = tuple(
 )
 
 
+@jit
 def saturate(x: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
     """sat(x) = x · min(1, bound/‖x‖): keeps the direction, bounds the norm (eq. 16)."""
-    n = float(np.sqrt(x @ x))
+    n = np.sqrt(x @ x)
     if n > bound:
         return x * (bound / n), True
-    return x, False
+    return x.copy(), False
+
+
+@jit
+def saturate_blocks(x: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Saturate each 3-block of a 9-vector by its bound; which blocks were limited."""
+    out = np.empty(9)
+    hit = np.zeros(3, dtype=np.bool_)
+    for b in range(3):
+        out[3 * b:3 * b + 3], hit[b] = saturate(x[3 * b:3 * b + 3], bounds[b])
+    return out, hit
+
+
+@functools.lru_cache(maxsize=64)
+def breve_bounds(lim: Limits, kind: str) -> np.ndarray:
+    """The bounds of the three v̆ blocks for ``kind`` 'acc' or 'rate'."""
+    b = np.array([getattr(lim, f"{name}_{kind}") for name, _ in BREVE_BLOCKS])
+    b.flags.writeable = False
+    return b
 
 
 def saturate_breve(x: np.ndarray, lim: Limits, kind: str) -> tuple[np.ndarray, dict[str, bool]]:
     """Block-wise saturation of a 9-vector of rates (``kind='rate'``) or accelerations."""
-    out = np.empty_like(x)
-    flags = {}
-    for name, sl in BREVE_BLOCKS:
-        out[sl], flags[f"sat_{name}_{kind}"] = saturate(x[sl], getattr(lim, f"{name}_{kind}"))
-    return out, flags
+    out, hit = saturate_blocks(x, breve_bounds(lim, kind))
+    return out, {f"sat_{name}_{kind}": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit,
+                                                                          strict=True)}

@@ -10,11 +10,11 @@ Row k of the log holds the state at the start of step k and what step k computed
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-import scipy.linalg as sla
 from tqdm import tqdm
 
 from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
@@ -22,6 +22,7 @@ from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import BaseGuidance, Reference
 from pipeline.sim.com_controller import com_step
+from pipeline.sim.jit import jit
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import attitude_error, quat_from_matrix
@@ -69,22 +70,39 @@ def task_errors(T: Terms, ref: Reference, gamma: float, v_c: np.ndarray) -> Task
     x̃ = [2ε_b; p_e − p_e,des; 2ε_e], J_x = blockdiag(E_b, R_te, E_e),
     v̆_des = [R_bt γω_b,des; R_et γ(ṗ_e,des − ṗ_c,des); R_et γω_e,des], G_vc = [0; R_et; 0].
     """
-    x_b, E_b = attitude_error(T.R_tb, ref.R_b)
-    x_o, E_e = attitude_error(T.R_te, ref.R_e)
-    R_et = T.R_te.T
+    return TaskErrors(*task_error_terms(T.R_tb, T.R_te, T.p_e, T.p_c, ref.R_b, ref.R_e, ref.p_e,
+                                        ref.p_c, ref.w_b, ref.v_e, ref.v_c, ref.w_e, gamma, v_c))
+
+
+@jit
+def task_error_terms(R_tb, R_te, p_e, p_c, R_b_des, R_e_des, p_e_des, p_c_des, w_b_des,
+                     v_e_des, v_c_des, w_e_des, gamma, v_c):
+    """The arrays of :func:`task_errors` (eq. 14), compiled."""
+    x_b, E_b = attitude_error(R_tb, R_b_des)
+    x_o, E_e = attitude_error(R_te, R_e_des)
+    R_et = np.ascontiguousarray(R_te.T)
+    R_bt = np.ascontiguousarray(R_tb.T)
     J_x = np.zeros((9, 9))
-    J_x[0:3, 0:3], J_x[3:6, 3:6], J_x[6:9, 6:9] = E_b, T.R_te, E_e
-    v_des = np.concatenate([T.R_tb.T @ (gamma * ref.w_b), R_et @ (gamma * (ref.v_e - ref.v_c)),
-                            R_et @ (gamma * ref.w_e)])
+    J_x[0:3, 0:3] = E_b
+    J_x[3:6, 3:6] = R_te
+    J_x[6:9, 6:9] = E_e
+    v_des = np.empty(9)
+    v_des[0:3] = R_bt @ (gamma * w_b_des)
+    v_des[3:6] = R_et @ (gamma * (v_e_des - v_c_des))
+    v_des[6:9] = R_et @ (gamma * w_e_des)
     G_vc = np.zeros((9, 3))
     G_vc[3:6] = R_et
-    return TaskErrors(np.concatenate([x_b, T.p_e - ref.p_e, x_o]), J_x, v_des, G_vc,
-                      v_c - gamma * ref.v_c, T.p_c - ref.p_c)
+    x = np.empty(9)
+    x[0:3] = x_b
+    x[3:6] = p_e - p_e_des
+    x[6:9] = x_o
+    return x, J_x, v_des, G_vc, v_c - gamma * v_c_des, p_c - p_c_des
 
 
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    """Angle between two vectors in degrees (eq. 18's pointing and boresight errors)."""
+    c = float(a @ b) / math.sqrt(float(a @ a) * float(b @ b))
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
 class Mission:
@@ -96,6 +114,8 @@ class Mission:
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self.step_breve = bc.INTEGRATORS[spec.controller.integrator]
+        # Without the bus derate the gains do not depend on γ: build them once.
+        self.gains = None if spec.controller.base.derate.gain else block_gains(spec.controller, 1.0)
         q_start = self.robot.start_configuration()
         T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
@@ -119,33 +139,34 @@ class Mission:
     def breve_rhs(self, T: Terms, err: TaskErrors, K: np.ndarray, D: np.ndarray,
                   s: LoopState, v_breve_dot_des: np.ndarray) -> np.ndarray:
         """RHS of eq. 13: the sum of its named terms."""
-        C_b, M_b = T.reduced_coriolis, T.reduced_inertia
-        return (bc.coriolis_term(C_b, s.v_breve)
+        C_breve, M_breve = T.reduced_coriolis, T.reduced_inertia
+        return (bc.coriolis_term(C_breve, s.v_breve)
                 + bc.damping_term(D, s.v_breve, err.v_breve_des)
                 + bc.stiffness_term(err.J_x, K, err.x_tilde)
                 + bc.com_coupling_term(T.com_coupling, D, err.G_vc, err.com_vel_err)
                 + bc.posture_term(T.gamma_inv, self.spec.controller.gains.posture,
                                   s.q[7:], self.robot.q_bar)
-                + bc.feedforward_term(M_b, v_breve_dot_des, C_b, err.v_breve_des))
+                + bc.feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
-        """One controller step from state ``s``: the next state and the row to log."""
+        """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
+        the guard's dt·μ_max of eq. 21): the next state and the row to log."""
         ctrl, dt = self.spec.controller, self.dt
         T = self.robot.terms(s.q, s.v)
         gamma = conditioning_scale(T.s_min_G, ctrl)
         ref = self.guidance.reference(s.tau, T.p_b)
         err = task_errors(T, ref, gamma, s.v_c)
-        K, D = block_gains(ctrl, gamma)
-        M_b = T.reduced_inertia
+        K, D = self.gains if self.gains is not None else block_gains(ctrl, gamma)
+        M_breve = T.reduced_inertia
         prev = s.v_breve_des_prev
         v_dot_des = np.zeros(9) if prev is None else (err.v_breve_des - prev) / dt
         rhs = self.breve_rhs(T, err, K, D, s, v_dot_des)
-        mu_max = float(sla.eigh(D, M_b, eigvals_only=True)[-1])
+        mu_max = float(bc.damping_rates(M_breve, D)[-1])
 
         if ctrl.integrator == "imex":
-            v_breve, flags = self.step_breve(M_b, D, rhs, s.v_breve, dt, ctrl.limits)
+            v_breve, flags = self.step_breve(M_breve, D, rhs, s.v_breve, dt, ctrl.limits)
         else:
-            v_breve, flags = self.step_breve(M_b, rhs, s.v_breve, dt, ctrl.limits)
+            v_breve, flags = self.step_breve(M_breve, rhs, s.v_breve, dt, ctrl.limits)
         com = com_step(err.com_pos_err, err.com_vel_err, s.v_c, gamma**2 * ref.a_c, s.integral,
                        ctrl.com, ctrl.limits, dt)
         v_raw = T.gamma_inv @ np.concatenate([com.v_c, v_breve])
@@ -161,7 +182,7 @@ class Mission:
             "kappa_J": T.kappa_J, "gamma": gamma, "dt_mu_max": dt * mu_max,
             "pointing_err_deg": angle_deg(T.R_tb[:, 2], -T.p_b),
             "boresight_err_deg": angle_deg(T.R_te[:, 2], ref.aim - T.p_e),
-            "com_err": float(np.linalg.norm(err.com_pos_err)),
+            "com_err": math.sqrt(float(err.com_pos_err @ err.com_pos_err)),
             "_p_e": T.p_e, "_R_te": T.R_te, **flags,
         }
         q_new = pin.integrate(self.robot.model, s.q, v_new * dt)
@@ -196,7 +217,8 @@ class Mission:
                 if not finite:
                     cut = {c: a[:k] for c, a in cols.items()}
                     return MissionResult(cut, "failed", k, f"step {k}: {why}", warned)
-                seen |= visible(self.target, row.pop("_p_e"), row.pop("_R_te"), self.spec.camera)
+                seen |= visible(  # coverage (eq. 18): the union of what was seen so far
+                    self.target, row.pop("_p_e"), row.pop("_R_te"), self.spec.camera)
                 row["coverage"] = float(seen.mean())
                 for c, val in row.items():
                     cols[c][k] = val

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.sim.jit import jit
 from pipeline.spec import Camera, Target
 
 
@@ -44,21 +45,37 @@ def build_target(cfg: Target) -> TargetGeometry:
     rng = np.random.default_rng(cfg.seed)
     pts, nrm = zip(*(_face_samples(rng, k, *f) for k, f in zip(counts, faces, strict=True)),
                    strict=True)
-    return TargetGeometry(np.vstack(pts), np.vstack(nrm).copy())
+    return TargetGeometry(np.ascontiguousarray(np.vstack(pts)),
+                          np.ascontiguousarray(np.vstack(nrm)))
 
 
 def visible(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Camera) -> np.ndarray:
-    """Points seen by the camera: in the field of view, within [d_min, d_max] along the
-    boresight, and with incidence (normal vs line of sight) below ``max_angle``. Occlusion
-    is not modelled. Vectorised over points.
+    """Points seen by the camera (eq. 18): in the field of view, within [d_min, d_max] along
+    the boresight, and with incidence (normal vs line of sight) below ``max_angle``.
+    Occlusion is not modelled.
     """
-    rel = target.points - p_e
-    p_cam = rel @ R_te  # rows: R_et (p − p_e)
-    depth = p_cam[:, 2]
-    lateral = np.hypot(p_cam[:, 0], p_cam[:, 1])
-    in_fov = lateral <= depth * np.tan(np.deg2rad(cam.fov_deg) / 2)
-    in_range = (depth >= cam.d_min) & (depth <= cam.d_max)
-    dist = np.linalg.norm(rel, axis=1)
-    cos_inc = -np.einsum("ij,ij->i", target.normals, rel) / np.maximum(dist, 1e-12)
-    facing = cos_inc >= np.cos(np.deg2rad(cam.max_angle_deg))
-    return in_fov & in_range & facing
+    return visible_mask(target.points, target.normals, np.ascontiguousarray(p_e),
+                        np.ascontiguousarray(R_te), np.tan(np.deg2rad(cam.fov_deg) / 2),
+                        cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)))
+
+
+@jit
+def visible_mask(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max):
+    """Per point: with r = p − p_e and (x, y, z) = R_teᵀ r, seen iff d_min <= z <= d_max,
+    √(x² + y²) <= z tan(fov/2) and −n·r >= ‖r‖ cos(max_angle) (eq. 18). A loop over points:
+    a dozen flops each, no temporaries.
+    """
+    n = points.shape[0]
+    out = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        r0 = points[i, 0] - p_e[0]
+        r1 = points[i, 1] - p_e[1]
+        r2 = points[i, 2] - p_e[2]
+        x = R_te[0, 0] * r0 + R_te[1, 0] * r1 + R_te[2, 0] * r2
+        y = R_te[0, 1] * r0 + R_te[1, 1] * r1 + R_te[2, 1] * r2
+        z = R_te[0, 2] * r0 + R_te[1, 2] * r1 + R_te[2, 2] * r2
+        facing = -(normals[i, 0] * r0 + normals[i, 1] * r1 + normals[i, 2] * r2)
+        dist = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        out[i] = (d_min <= z <= d_max and np.sqrt(x * x + y * y) <= z * tan_half_fov
+                  and facing >= dist * cos_max)
+    return out

@@ -1,0 +1,154 @@
+"""The task-space transform Γ, its inverse and rate, and the transformed dynamics (eqs. 2–11).
+
+Pure functions of arrays for one state, compiled with Numba: a step needs some thirty small
+dense products, and at a few microseconds of NumPy call overhead each they would cost ten
+times the Pinocchio calls of the step. The simulator and the analysis call these same
+functions, so a Γ rebuilt from a logged q is the simulator's Γ to the bit.
+
+Conventions: v = [v_b; ω_b; q̇] in Pinocchio's free-flyer convention (b frame), camera
+Jacobian J_e in the camera's LOCAL frame, R_xy rotates y-coordinates into x.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.sim.jit import jit
+from pipeline.sim.rotations import skew
+
+
+@jit
+def kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass):
+    """p_bc, p_c, R_eb, p_ec, J̄_v, J⊕, G_ωb from placements, J_e and M (eqs. 2–4).
+
+    M's bus block gives the CoM offset, M[0:3, 3:6] = −m [p_bc]×, and J̄_v = M[0:3, 6:]/m
+    (eq. 2); J⊕ = J_e[:, 6:] − [R_eb; 0] J̄_v (eq. 3); G_ωb = [[p_ec]× R_eb; R_eb] (eq. 4).
+    """
+    p_bc = np.array([M[1, 5], M[2, 3], M[0, 4]]) / mass
+    R_tb = np.ascontiguousarray(R_tb)
+    R_et = np.ascontiguousarray(R_te.T)
+    p_c = p_b + R_tb @ p_bc
+    R_eb = R_et @ R_tb
+    p_ec = R_et @ (p_c - p_e)
+    J_bar_v = np.ascontiguousarray(M[0:3, 6:]) / mass
+    J_oplus = np.ascontiguousarray(J_e[:, 6:])
+    J_oplus[0:3, :] -= R_eb @ J_bar_v
+    G_wb = np.empty((6, 3))
+    G_wb[0:3] = skew(p_ec) @ R_eb
+    G_wb[3:6] = R_eb
+    return p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb
+
+
+@jit
+def damped_pinv(J, floor, damping):
+    """Damped SVD pseudo-inverse of J and its (σ_min, κ) from the same SVD (eqs. 6, 19).
+
+    J⁺ = V diag(σ_i / (σ_i² + λ²)) Uᵀ,  λ² = damping² (1 − (σ_min/floor)²) if σ_min < floor,
+    else 0: the exact inverse away from the singularity, a bounded one near it.
+    """
+    U, s, Vt = np.linalg.svd(J)
+    smin = s[-1]
+    lam2 = damping**2 * (1.0 - (smin / floor) ** 2) if smin < floor else 0.0
+    J_inv = (Vt.T * (s / (s * s + lam2))) @ U.T
+    kappa = s[0] / smin if smin > 0 else np.inf
+    return J_inv, smin, kappa
+
+
+@jit
+def gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus):
+    """Γ (eq. 5): ν = [v_c; ω_b; ν_e⊕] = Γ v.
+
+    Γ = [[R_tb, −R_tb [p_bc]×, R_tb J̄_v], [0, I₃, 0], [0, G_ωb, J⊕]].
+    """
+    n = J_oplus.shape[1]
+    g = np.zeros((6 + n, 6 + n))
+    g[0:3, 0:3] = R_tb
+    g[0:3, 3:6] = -(R_tb @ skew(p_bc))
+    g[0:3, 6:] = R_tb @ J_bar_v
+    g[3, 3] = g[4, 4] = g[5, 5] = 1.0
+    g[6:, 3:6] = G_wb
+    g[6:, 6:] = J_oplus
+    return g
+
+
+@jit
+def gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_oplus_inv):
+    """Closed-form Γ⁻¹ through J⊕⁻¹ (eq. 6).
+
+    Γ⁻¹ = [[R_tbᵀ, [p_bc]× + J̄_v J⊕⁻¹ G_ωb, −J̄_v J⊕⁻¹], [0, I₃, 0], [0, −J⊕⁻¹ G_ωb, J⊕⁻¹]].
+    """
+    n = J_oplus_inv.shape[0]
+    JiG = J_oplus_inv @ G_wb
+    g = np.zeros((6 + n, 6 + n))
+    g[0:3, 0:3] = R_tb.T
+    g[0:3, 3:6] = skew(p_bc) + J_bar_v @ JiG
+    g[0:3, 6:] = -(J_bar_v @ J_oplus_inv)
+    g[3, 3] = g[4, 4] = g[5, 5] = 1.0
+    g[6:, 3:6] = -JiG
+    g[6:, 6:] = J_oplus_inv
+    return g
+
+
+@jit
+def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg, mass):
+    """Γ̇ (eq. 7) from the Jacobian and centroidal-map time variations.
+
+    Ṙ_tb = R_tb [ω_b]×;  ṗ_bc = J̄_v q̇;  J̄̇_v = −[ω_b]× J̄_v + R_bt Ȧg[0:3, 6:]/m;
+    Ṙ_eb = R_eb [ω_b]× − [ω_e]× R_eb;  ṗ_ec = R_et Ag[0:3] v/m − [ω_e]× p_ec − v_e;
+    Ġ_ωb = [[ṗ_ec]× R_eb + [p_ec]× Ṙ_eb; Ṙ_eb];  J̇⊕ = J̇_e[:, 6:] − [Ṙ_eb J̄_v + R_eb J̄̇_v; 0].
+    """
+    w_b = v[3:6].copy()
+    qd = v[6:].copy()
+    twist_e = np.ascontiguousarray(J_e) @ v
+    v_e, w_e = twist_e[:3], twist_e[3:]
+    S_wb, S_we = skew(w_b), skew(w_e)
+    R_bt = np.ascontiguousarray(R_tb.T)
+    J_bar_v_dot = -(S_wb @ J_bar_v) + R_bt @ np.ascontiguousarray(dAg[0:3, 6:]) / mass
+    p_bc_dot = J_bar_v @ qd
+    R_eb_dot = R_eb @ S_wb - S_we @ R_eb
+    p_c_dot = np.ascontiguousarray(Ag[0:3]) @ v / mass
+    p_ec_dot = np.ascontiguousarray(R_te.T) @ p_c_dot - S_we @ p_ec - v_e
+    R_tb_dot = R_tb @ S_wb
+    g = np.zeros((12, 12))
+    g[0:3, 0:3] = R_tb_dot
+    g[0:3, 3:6] = -(R_tb_dot @ skew(p_bc)) - R_tb @ skew(p_bc_dot)
+    g[0:3, 6:] = R_tb_dot @ J_bar_v + R_tb @ J_bar_v_dot
+    g[6:9, 3:6] = skew(p_ec_dot) @ R_eb + skew(p_ec) @ R_eb_dot
+    g[9:12, 3:6] = R_eb_dot
+    g[6:, 6:] = dJ_e[:, 6:]
+    g[6:9, 6:] -= R_eb_dot @ J_bar_v + R_eb @ J_bar_v_dot
+    return g
+
+
+@jit
+def transformed_dynamics(M, C, gamma_inv, gamma_dot):
+    """M̂ = Γ⁻ᵀ M Γ⁻¹ (eq. 8) and Ĉ = Γ⁻ᵀ (C − M Γ⁻¹ Γ̇) Γ⁻¹ (eq. 9)."""
+    M = np.ascontiguousarray(M)
+    MGi = M @ gamma_inv
+    GiT = np.ascontiguousarray(gamma_inv.T)
+    M_hat = GiT @ MGi
+    C_hat = GiT @ (np.ascontiguousarray(C) @ gamma_inv - MGi @ (gamma_dot @ gamma_inv))
+    return M_hat, C_hat
+
+
+@jit
+def task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping):
+    """Eqs. 2–6 in one call: the kinematic terms, the damped J⊕⁻¹ with J⊕'s (σ_min, κ), Γ, Γ⁻¹."""
+    p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb = kinematic_terms(R_tb, p_b, R_te, p_e, J_e,
+                                                                   M, mass)
+    J_inv, s_min_J, kappa_J = damped_pinv(J_oplus, floor, damping)
+    R_tb = np.ascontiguousarray(R_tb)
+    gamma = gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus)
+    gamma_inv = gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_inv)
+    return (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
+            gamma_inv)
+
+
+@jit
+def dynamics_transform(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg, mass, M, C,
+                       gamma_inv):
+    """Eqs. 7–9 in one call: Γ̇, M̂ and Ĉ."""
+    gamma_dot = gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag,
+                                      dAg, mass)
+    M_hat, C_hat = transformed_dynamics(M, C, gamma_inv, gamma_dot)
+    return gamma_dot, M_hat, C_hat
