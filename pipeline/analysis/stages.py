@@ -101,6 +101,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
                       "theory_direction": th["direction"].tolist(),
                       "data_direction": data_dir.tolist()},
         "velocity_jump": {"median": float(np.median(jumps)), "max": float(np.max(jumps))},
+        "bus_rate": bus_rate_statistics(cols["v"][:, 3:6]),
         "metrics": mission_metrics(cols),
     }
 
@@ -167,6 +168,19 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
     return {"record": record, "direction": direction}
 
 
+def bus_rate_statistics(w_b: np.ndarray) -> dict:
+    """The bus angular rate ω_b alone: lag-1 of its dominant step-to-step component (eq. 25).
+
+    The component is ω_b projected on its direction of most step-to-step energy; its
+    alternating part, a = (x_k − 2x_{k+1} + x_{k+2})/4 (exact for a period-2 signal), is
+    compared with its standard deviation to say how much of ω_b the ripple is.
+    """
+    x = w_b @ signals.dominant_step_direction(w_b)
+    alt = (x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+    return {"lag1": float(signals.lag1_autocorrelation(x)), "std": float(x.std()),
+            "step_rms": float(signals.step_rms(x)), "alternating_rms": float(signals.rms(alt))}
+
+
 def mission_metrics(cols: dict[str, np.ndarray]) -> dict:
     """Window metrics: pointing and boresight errors, coverage, and how often each limit bound."""
     return {
@@ -188,6 +202,8 @@ COMPARE_ROWS = (
     ("spectral radius", ("theory", "spectral_radius")),
     ("alignment |cos|", ("alignment", "abs_cos")),
     ("median ‖Δv‖", ("velocity_jump", "median")),
+    ("bus rate ω_b: lag-1 of its dominant component", ("bus_rate", "lag1")),
+    ("bus rate ω_b: alternating RMS (rad/s)", ("bus_rate", "alternating_rms")),
     ("provenance max |Δσ_min|", ("provenance", "max_abs_s_min_G")),
     ("max pointing error (deg)", ("metrics", "pointing_err_deg_max")),
     ("final coverage", ("metrics", "coverage_final")),

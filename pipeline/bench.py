@@ -1,0 +1,246 @@
+"""``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor (DESIGN §7).
+
+Every figure is measured in this process on the same configurations (those of a nominal run),
+repeated, and reported as median with min and max:
+
+- ``floor_us``: the Pinocchio calls one step needs (CRBA, Coriolis matrix, joint Jacobians and
+  their time variation with the camera frame's Jacobian and its variation, centroidal map and
+  its time variation);
+- ``sim_step_us``: one whole controller step of the nominal mission (both loops, guidance,
+  coverage, filling the log's columns), from ``Mission.run``;
+- ``analysis_step_us``: the per-step analysis of a log (Γ rebuilt from q, per-direction SVD,
+  lag-1), streamed by row group as ``analyze`` does it;
+- growth of mission wall time with length (10³, 10⁴, 10⁵ steps) and its fitted exponent;
+- peak memory (max RSS of a fresh process) of ``analyze`` on a 10⁵- and a 10⁶-step log.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pyarrow.parquet as pq
+
+from pipeline.analysis import signals
+from pipeline.analysis.stages import Window, rebuild_and_project
+from pipeline.logs import atomic_write_text
+from pipeline.sim.mission import Mission
+from pipeline.sim.robot import LOCAL, GiordanoRobot
+from pipeline.sim.run import run_spec
+from pipeline.spec import Spec, load_spec, with_overrides
+
+
+def _stats(samples: list[float]) -> dict:
+    a = np.asarray(samples, dtype=float)
+    return {"median": float(np.median(a)), "min": float(a.min()), "max": float(a.max()),
+            "repeats": len(a)}
+
+
+def floor_us(robot: GiordanoRobot, q: np.ndarray, v: np.ndarray, repeats: int) -> dict:
+    """Per-step cost of the Pinocchio calls of one step, over the given states."""
+    model, data, fid = robot.model, robot.data, robot.frame_id
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for qk, vk in zip(q, v, strict=True):
+            pin.computeJointJacobiansTimeVariation(model, data, qk, vk)
+            pin.updateFramePlacement(model, data, fid)
+            pin.getFrameJacobian(model, data, fid, LOCAL)
+            pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
+            pin.crba(model, data, qk)
+            pin.computeCoriolisMatrix(model, data, qk, vk)
+            pin.computeCentroidalMapTimeVariation(model, data, qk, vk)
+        out.append((time.perf_counter() - t0) / len(q) * 1e6)
+    return _stats(out)
+
+
+def sim_step_us(spec: Spec, repeats: int) -> dict:
+    """Per-step cost of ``Mission.run`` (construction excluded)."""
+    out = []
+    for _ in range(repeats):
+        mission = Mission(spec)
+        t0 = time.perf_counter()
+        mission.run()
+        out.append((time.perf_counter() - t0) / spec.n_steps * 1e6)
+    return _stats(out)
+
+
+def analysis_step_us(path: Path, spec: Spec, repeats: int) -> dict:
+    """Per-step cost of stages 1–3 on a log: Γ rebuild, per-direction SVD, lag-1."""
+    robot = GiordanoRobot(spec)
+    n = pq.ParquetFile(path).metadata.num_rows
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        _, y, _ = rebuild_and_project(robot, path, Window(n // 2, n, "bench"))
+        signals.lag1_autocorrelation(y)
+        signals.step_rms(y)
+        out.append((time.perf_counter() - t0) / n * 1e6)
+    return _stats(out)
+
+
+def growth(spec: Spec, lengths: list[int]) -> dict:
+    """Wall time of missions of the given step counts and the fitted exponent of t ∝ Nᵖ."""
+    walls = []
+    for n in lengths:
+        s = with_overrides(spec, {"mission.duration": n * spec.mission.dt})
+        mission = Mission(s)
+        t0 = time.perf_counter()
+        mission.run()
+        walls.append(time.perf_counter() - t0)
+    p = float(np.polyfit(np.log(lengths), np.log(walls), 1)[0])
+    return {"steps": lengths, "wall_s": walls, "exponent": p}
+
+
+def tiled_log(src: Path, dst: Path, factor: int) -> Path:
+    """A log of ``factor`` times the rows of ``src``, its rows repeated (same metadata).
+
+    The analysis' cost per step does not depend on the trajectory, so a long log for the
+    memory measurement need not be simulated.
+    """
+    pf = pq.ParquetFile(src)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    with pq.ParquetWriter(dst, pf.schema_arrow, compression="zstd") as w:
+        for _ in range(factor):
+            for rg in range(pf.num_row_groups):
+                w.write_table(pf.read_row_group(rg))
+    return dst
+
+
+_PEAK = ("import resource, sys; from pipeline.cli import main; rc = main(sys.argv[1:]); "
+         "print('MAXRSS_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); "
+         "sys.exit(rc)")
+
+
+def peak_memory_mb(log: Path, out: Path) -> float:
+    """Max RSS (MB) of a fresh process running ``analyze`` on ``log``."""
+    r = subprocess.run([sys.executable, "-c", _PEAK, "analyze", str(log), "--out", str(out)],
+                       capture_output=True, text=True, check=False)
+    if r.returncode != 0:
+        raise RuntimeError(f"analyze of {log} failed: {r.stderr.strip()}")
+    kb = next(int(line.split()[1]) for line in r.stdout.splitlines()
+              if line.startswith("MAXRSS_KB"))
+    return kb / 1024
+
+
+def machine() -> dict:
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import numba
+
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "pinocchio": pin.__version__, "numba": numba.__version__,
+            "platform": platform.platform()}
+
+
+def run_bench(out_dir: Path, quick: bool = False) -> dict:
+    spec = load_spec("nominal")
+    repeats = 3 if quick else 5
+    base_steps = 1000 if quick else spec.n_steps
+    base = with_overrides(spec, {"mission.duration": base_steps * spec.mission.dt})
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        _progress("warm-up and reference run")
+        log = run_spec(base, tmp / "logs").path
+        cols = pq.read_table(log, columns=["q", "v"])
+        q = np.stack(cols.column("q").to_numpy(zero_copy_only=False))
+        v = np.stack(cols.column("v").to_numpy(zero_copy_only=False))
+        robot = GiordanoRobot(base)
+        _progress("floor")
+        floor = floor_us(robot, q, v, repeats)
+        _progress("simulator step")
+        sim = sim_step_us(base, repeats)
+        _progress("analysis step")
+        ana = analysis_step_us(log, base, repeats)
+        lengths = [1000, 3000, 10000] if quick else [1000, 10000, 100000]
+        _progress(f"growth over {lengths} steps")
+        grow = growth(spec, lengths)
+        _progress("peak memory")
+        n_mem = 10000 if quick else 100000
+        long = run_spec(with_overrides(spec, {"mission.duration": n_mem * spec.mission.dt},
+                                       name="bench_long"), tmp / "logs").path
+        big = tiled_log(long, tmp / "big" / "bench_long" / "run.parquet", 10)
+        memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
+                  f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
+    result = {
+        "floor_us": floor,
+        "sim_step_us": sim,
+        "sim_ratio": sim["median"] / floor["median"],
+        "analysis_step_us": ana,
+        "analysis_ratio": ana["median"] / floor["median"],
+        "growth": grow,
+        "peak_memory_mb": memory,
+        "steps_per_s": 1e6 / sim["median"],
+        "quick": quick,
+        "machine": machine(),
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "bench.json", json.dumps(result, indent=1) + "\n")
+    atomic_write_text(out_dir / "bench.md", bench_markdown(result))
+    return result
+
+
+def _progress(msg: str) -> None:
+    print(f"bench: {msg}", file=sys.stderr, flush=True)
+
+
+def bench_markdown(r: dict) -> str:
+    def row(name, s):
+        return f"| {name} | {s['median']:.1f} | {s['min']:.1f} | {s['max']:.1f} |"
+
+    g = r["growth"]
+    mem = "\n".join(f"| {n} | {mb:.0f} |" for n, mb in r["peak_memory_mb"].items())
+    grow = "\n".join(f"| {n} | {w:.2f} |" for n, w in zip(g["steps"], g["wall_s"], strict=True))
+    m = r["machine"]
+    return f"""# Benchmark
+
+Machine: {m['cpu']}, {m['cores']} cores; Python {m['python']}, NumPy {m['numpy']},
+Pinocchio {m['pinocchio']}, Numba {m['numba']}.{' Quick mode (shorter runs).' if r['quick'] else ''}
+
+| per step (µs) | median | min | max |
+|---|---|---|---|
+{row('floor: Pinocchio calls of one step', r['floor_us'])}
+{row('simulator: whole controller step', r['sim_step_us'])}
+{row('analysis: Γ rebuild, per-direction SVD, lag-1', r['analysis_step_us'])}
+
+- sim_ratio = {r['sim_ratio']:.2f} (target ≤ 10); analysis_ratio = {r['analysis_ratio']:.2f}
+  (target ≤ 3); {r['steps_per_s']:.0f} simulator steps per second.
+
+## Growth with mission length (fitted exponent {g['exponent']:.3f})
+
+| steps | wall (s) |
+|---|---|
+{grow}
+
+## Peak memory of `analyze` (max RSS of a fresh process)
+
+The longer log repeats the shorter one's rows ten times (the analysis cost does not depend on
+the trajectory); it is read by row groups.
+
+| steps | MB |
+|---|---|
+{mem}
+"""
+
+
+def bench_command(args) -> int:
+    r = run_bench(Path(args.out), quick=args.quick)
+    print(f"floor {r['floor_us']['median']:.1f} µs, sim {r['sim_step_us']['median']:.1f} µs "
+          f"(ratio {r['sim_ratio']:.2f}), analysis {r['analysis_step_us']['median']:.1f} µs "
+          f"(ratio {r['analysis_ratio']:.2f}), growth exponent {r['growth']['exponent']:.3f}, "
+          f"peak memory {r['peak_memory_mb']} MB -> {Path(args.out) / 'bench.json'}")
+    return 0
