@@ -1,4 +1,6 @@
-"""``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor (DESIGN §7).
+"""``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor.
+
+See DESIGN §7.
 
 Every figure is measured in this process on the same configurations (those of a nominal run),
 repeated, and reported as median with min and max:
