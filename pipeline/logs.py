@@ -29,6 +29,8 @@ SCALAR_COLUMNS = (
 )
 META_KEYS = ("spec", "spec_hash", "code_version", "robot_file", "robot_hash", "status")
 ROW_GROUP = 65_536
+_UMASK = os.umask(0)
+os.umask(_UMASK)
 
 
 @dataclass(frozen=True)
@@ -48,8 +50,10 @@ class LogMeta:
 
 
 def _atomic_target(path: Path) -> Path:
+    """A fresh temporary file beside ``path``, readable as an ordinary file would be."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; the final file should not be
     os.close(fd)
     return Path(tmp)
 

@@ -72,7 +72,7 @@ def test_projection_equals_u_transpose_gamma_v(rng):
     G = rng.standard_normal((6, 12, 12))
     v = rng.standard_normal((6, 12))
     part = project_chunk(G, v)
-    U, s, Vt = np.linalg.svd(G)
+    U, s, _ = np.linalg.svd(G)
     direct = np.einsum("kji,kj->ki", U, np.einsum("kij,kj->ki", G, v))
     assert np.allclose(np.abs(part.y), np.abs(direct), atol=1e-10)
     assert np.allclose(part.s_min, s[:, -1])

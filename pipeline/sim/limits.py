@@ -21,6 +21,9 @@ LIMIT_FLAGS = tuple(
 def saturate(x: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
     """sat(x) = x · min(1, bound/‖x‖): keeps the direction, bounds the norm (eq. 16)."""
     n = np.sqrt(x @ x)
+    if n == np.inf:  # ‖x‖² overflowed: rescale, or x·bound/‖x‖ would silently be 0
+        s = np.max(np.abs(x))
+        n = s * np.sqrt((x / s) @ (x / s))
     if n > bound:
         return x * (bound / n), True
     return x.copy(), False

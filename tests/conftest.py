@@ -1,0 +1,69 @@
+"""Shared fixtures: a seeded ``rng``, the nominal robot, and random states away from singularity.
+
+Every randomised test either takes ``rng`` (one fixed seed) or loops over ``SEEDS`` so that a
+failure is reproducible from the seed printed in its message.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline.sim.robot import GiordanoRobot
+from pipeline.spec import PROJECT_ROOT, Spec, load_spec
+
+SEEDS = (0, 1, 2, 3, 4)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20240601)
+
+
+@pytest.fixture(scope="session")
+def nominal_spec() -> Spec:
+    return load_spec("nominal")
+
+
+@pytest.fixture(scope="session")
+def robot(nominal_spec: Spec) -> GiordanoRobot:
+    return GiordanoRobot(nominal_spec)
+
+
+def random_quaternion(rng: np.random.Generator) -> np.ndarray:
+    """Uniform random unit quaternion (x, y, z, w): a normalised 4-D Gaussian."""
+    q = rng.standard_normal(4)
+    return q / np.linalg.norm(q)
+
+
+def random_state(robot: GiordanoRobot, rng: np.random.Generator, spread: float = 0.5,
+                 margin: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """A random (q, v): random bus pose (position within ±6 m, uniform attitude), arm joints
+    uniform within ±``spread`` rad of q̄, redrawn until σ_min(J⊕) > ``margin`` × the damped
+    floor (so J⊕ is inverted exactly), and a velocity v ~ 0.3·N(0, I) (m/s, rad/s: the
+    mission's speeds).
+    """
+    for _ in range(200):
+        q = pin.neutral(robot.model)
+        q[0:3] = rng.uniform(-6.0, 6.0, 3)
+        q[3:7] = random_quaternion(rng)
+        q[7:] = robot.q_bar + rng.uniform(-spread, spread, robot.n)
+        T = robot.terms(q, np.zeros(robot.model.nv), dynamics=False)
+        if T.s_min_J > margin * robot.floor:
+            v = 0.3 * rng.standard_normal(robot.model.nv)
+            return q, v
+    raise AssertionError("no configuration away from singularity found in 200 draws")
+
+
+def run_cli(*args: str, cwd: Path | None = None, timeout: float = 120
+            ) -> subprocess.CompletedProcess:
+    """``python -m pipeline ARGS`` in a fresh interpreter (stderr not a TTY: no progress bar)."""
+    env = dict(os.environ, PYTHONWARNINGS="error")
+    return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd or PROJECT_ROOT,
+                          capture_output=True, text=True, timeout=timeout, env=env)

@@ -1,0 +1,630 @@
+"""The simulator: integrators, stability guard, determinism, coverage, failure handling, logs,
+and the physics of the period-2 ripple on the short missions.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import SEEDS, run_cli
+
+from pipeline.errors import LogError, RunFailed
+from pipeline.logs import num_rows, read_columns, read_meta
+from pipeline.sim import breve_controller as bc
+from pipeline.sim.limits import LIMIT_FLAGS, saturate
+from pipeline.sim.mission import Mission
+from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.run import run_spec
+from pipeline.sim.target import build_target, visible
+from pipeline.spec import PROJECT_ROOT, Camera, Limits, Target, load_spec, with_overrides
+
+SHORT = ("short_nominal", "short_omega_ripple_dt010", "short_omega_ripple_imex")
+NO_LIMITS = Limits(omega_b_rate=1e9, omega_b_acc=1e9, nu_e_lin_rate=1e9, nu_e_lin_acc=1e9,
+                   nu_e_ang_rate=1e9, nu_e_ang_acc=1e9, v_c_rate=1e9, v_c_acc=1e9, v_max=1e9)
+
+
+def _three_seconds(name: str, **over):
+    return with_overrides(load_spec(name), {"mission.duration": 3.0, **over})
+
+
+def _random_spd(rng, n=9):
+    A = rng.standard_normal((n, n))
+    return A @ A.T + n * np.eye(n)
+
+
+# -- integrators -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_imex_step_solves_its_defining_equation(seed):
+    """(M + dt D) v⁺ = M v + dt (RHS + D v), no limit active."""
+    rng = np.random.default_rng(seed)
+    M = _random_spd(rng)
+    D = np.diag(rng.uniform(0.5, 50.0, 9))
+    v, rhs = rng.standard_normal(9), rng.standard_normal(9)
+    dt = 0.03
+    v_new, flags = bc.imex_step(M, D, rhs, v, dt, NO_LIMITS)
+    assert not any(flags.values())
+    lhs = (M + dt * D) @ v_new
+    np.testing.assert_allclose(lhs, M @ v + dt * (rhs + D @ v), atol=1e-12 * np.abs(lhs).max())
+    # Equivalently M (v⁺ − v)/dt = RHS + D v − D v⁺: implicit in the damping only.
+    np.testing.assert_allclose(M @ (v_new - v) / dt, rhs + D @ v - D @ v_new, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_imex_scalar_damping_closed_form(seed):
+    """With RHS = −d(v − v_des): v⁺ − v_des = (v − v_des)/(1 + dt d/m), per component."""
+    rng = np.random.default_rng(seed)
+    m, d, dt = rng.uniform(0.01, 5.0), rng.uniform(0.1, 10.0), 0.03
+    M, D = m * np.eye(9), d * np.eye(9)
+    v, v_des = rng.standard_normal(9), rng.standard_normal(9)
+    v_new, _ = bc.imex_step(M, D, bc.damping_term(D, v, v_des), v, dt, NO_LIMITS)
+    np.testing.assert_allclose(v_new - v_des, (v - v_des) / (1 + dt * d / m), rtol=1e-10,
+                               atol=1e-13)
+    # And forward Euler: v⁺ − v_des = (1 − dt d/m)(v − v_des), unstable beyond dt d/m = 2.
+    v_exp, _ = bc.explicit_step(M, bc.damping_term(D, v, v_des), v, dt, NO_LIMITS)
+    np.testing.assert_allclose(v_exp - v_des, (1 - dt * d / m) * (v - v_des), rtol=1e-10,
+                               atol=1e-13)
+
+
+def test_imex_is_contracting_where_explicit_flips_sign():
+    """dt·d/m = 2.95 (the nominal camera-roll mode): explicit ρ = −1.95, imex ρ = 1/3.95."""
+    m, dt = 0.01, 0.03
+    d = 2.95 * m / dt
+    M, D = m * np.eye(9), d * np.eye(9)
+    v, v_des = np.ones(9), np.zeros(9)
+    v_exp, _ = bc.explicit_step(M, bc.damping_term(D, v, v_des), v, dt, NO_LIMITS)
+    v_imp, _ = bc.imex_step(M, D, bc.damping_term(D, v, v_des), v, dt, NO_LIMITS)
+    np.testing.assert_allclose(v_exp, -1.95 * v, rtol=1e-12)
+    np.testing.assert_allclose(v_imp, v / 3.95, rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_explicit_step_is_forward_euler(seed):
+    rng = np.random.default_rng(seed)
+    M = _random_spd(rng)
+    v, rhs = rng.standard_normal(9), rng.standard_normal(9)
+    v_new, flags = bc.explicit_step(M, rhs, v, 0.03, NO_LIMITS)
+    assert not any(flags.values())
+    np.testing.assert_allclose(v_new, v + 0.03 * np.linalg.inv(M) @ rhs, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("integrator", ["explicit", "imex"])
+def test_saturation_bounds_each_block_and_keeps_direction(seed, integrator):
+    rng = np.random.default_rng(seed)
+    M = _random_spd(rng)
+    D = np.diag(rng.uniform(0.5, 5.0, 9))
+    v, rhs = rng.standard_normal(9), 100 * rng.standard_normal(9)
+    dt = 0.03
+    blocks = [("omega_b", slice(0, 3)), ("nu_e_lin", slice(3, 6)), ("nu_e_ang", slice(6, 9))]
+
+    def step(lim):
+        if integrator == "imex":
+            return bc.imex_step(M, D, rhs, v, dt, lim)
+        return bc.explicit_step(M, rhs, v, dt, lim)
+
+    free, _ = step(NO_LIMITS)
+    acc_free = (free - v) / dt
+    # Acceleration limits only (rates unbounded): each block of (v⁺ − v)/dt is clipped to
+    # its bound along the unsaturated direction.
+    acc_lim = NO_LIMITS.model_copy(update={"omega_b_acc": 0.5, "nu_e_lin_acc": 1.0,
+                                           "nu_e_ang_acc": 2.0})
+    v_acc, flags = step(acc_lim)
+    acc = (v_acc - v) / dt
+    for name, sl in blocks:
+        bound = getattr(acc_lim, f"{name}_acc")
+        assert np.linalg.norm(acc_free[sl]) > bound  # the limit really binds
+        assert np.linalg.norm(acc[sl]) == pytest.approx(bound, rel=1e-9)
+        np.testing.assert_allclose(acc[sl], acc_free[sl] * bound / np.linalg.norm(acc_free[sl]),
+                                   rtol=1e-9)
+        assert flags[f"sat_{name}_acc"] and not flags[f"sat_{name}_rate"]
+    # Rate limits only.
+    rate_lim = NO_LIMITS.model_copy(update={"omega_b_rate": 0.1, "nu_e_lin_rate": 0.2,
+                                            "nu_e_ang_rate": 0.3})
+    v_rate, flags = step(rate_lim)
+    for name, sl in blocks:
+        bound = getattr(rate_lim, f"{name}_rate")
+        assert np.linalg.norm(v_rate[sl]) <= bound * (1 + 1e-12)
+        assert flags[f"sat_{name}_rate"] == (np.linalg.norm(free[sl]) > bound)
+        if flags[f"sat_{name}_rate"]:
+            np.testing.assert_allclose(v_rate[sl], free[sl] * bound / np.linalg.norm(free[sl]),
+                                       rtol=1e-9)
+
+
+def _norm(x: np.ndarray) -> float:
+    """‖x‖ without overflow: scale by max|x| first (np.linalg.norm does not)."""
+    s = float(np.max(np.abs(x)))
+    return s * float(np.sqrt(np.sum((x / s) ** 2)))
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e3, 1e155, 1e300])
+def test_saturate_bounds_the_norm_at_any_magnitude(rng, scale):
+    """sat(x) = x·min(1, b/‖x‖), also when ‖x‖² overflows (|x| ~ 1e155, 1e300)."""
+    x = scale * rng.standard_normal(3)
+    bound = 1e-3 * _norm(x)
+    y, hit = saturate(x, bound)
+    assert hit
+    assert np.all(np.isfinite(y))
+    assert _norm(y) == pytest.approx(bound, rel=1e-12)
+    np.testing.assert_allclose(y / bound, x / _norm(x), rtol=1e-12)
+    same, hit = saturate(x, 2 * _norm(x))
+    assert not hit and np.array_equal(same, x)
+
+
+def test_saturate_passes_non_finite_through(rng):
+    """A non-finite vector must stay non-finite (the mission then stops), never become 0."""
+    for bad in (np.inf, -np.inf, np.nan):
+        x = rng.standard_normal(3)
+        x[1] = bad
+        y, _ = saturate(x, 1.0)
+        assert not np.all(np.isfinite(y))
+
+
+def test_rhs_terms_are_their_formulas(rng):
+    C, M, D, K, J = (rng.standard_normal((9, 9)) for _ in range(5))
+    v, vd, x, vdd = (rng.standard_normal(9) for _ in range(4))
+    Cc, G, e = rng.standard_normal((9, 3)), rng.standard_normal((9, 3)), rng.standard_normal(3)
+    np.testing.assert_allclose(bc.coriolis_term(C, v), -C @ v)
+    np.testing.assert_allclose(bc.damping_term(D, v, vd), -D @ v + D @ vd)
+    np.testing.assert_allclose(bc.stiffness_term(J, K, x), -J.T @ K @ x)
+    np.testing.assert_allclose(bc.com_coupling_term(Cc, D, G, e), -Cc @ e - D @ G @ e)
+    np.testing.assert_allclose(bc.feedforward_term(M, vdd, C, vd), M @ vdd + C @ vd)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_posture_term_is_the_covector_map(robot, seed):
+    """F̂ = Γ⁻ᵀ τ with τ = [0; 0; −k(q − q̄)]; its reduced rows are the posture term, and the
+    power is invariant: τᵀ v = F̂ᵀ ν."""
+    from conftest import random_state
+
+    rng = np.random.default_rng(seed)
+    q, v = random_state(robot, rng)
+    T = robot.terms(q, v)
+    k = 3.0
+    tau = np.concatenate([np.zeros(6), -k * (q[7:] - robot.q_bar)])
+    F_hat = T.gamma_inv.T @ tau
+    got = bc.posture_term(T.gamma_inv, k, q[7:], robot.q_bar)
+    np.testing.assert_allclose(got, F_hat[3:], atol=1e-12)
+    np.testing.assert_allclose(F_hat[:3], 0.0, atol=1e-9)  # no CoM force from internal torques
+    assert tau @ v == pytest.approx(F_hat @ (T.gamma @ v), rel=1e-9)
+
+
+# -- stability guard ---------------------------------------------------------------------------
+
+def _mu_max_independent(spec, q):
+    """μ_max of (D̆, M̆) by a plain eigen-solve of M̆⁻¹ D̆, D̆ built from the spec's gains."""
+    robot = GiordanoRobot(spec)
+    M_b = robot.terms(q, np.zeros(robot.model.nv)).reduced_inertia
+    g = spec.controller.gains
+    D = np.diag([g.bus.D] * 3 + [g.cam_pos.D] * 3 + [g.cam_ori.D] * 3)
+    return float(np.max(np.linalg.eigvals(np.linalg.solve(M_b, D)).real))
+
+
+@pytest.fixture(scope="module")
+def guard_runs():
+    specs = {
+        "explicit_dt003": _three_seconds("nominal"),
+        "imex_dt003": _three_seconds("omega_ripple_imex"),
+        "explicit_dt001": _three_seconds("omega_ripple_dt010"),
+    }
+    return {k: (s, Mission(s).run()) for k, s in specs.items()}
+
+
+def test_guard_warns_once_under_explicit_beyond_two(guard_runs):
+    spec, res = guard_runs["explicit_dt003"]
+    assert res.status == "complete"
+    assert len(res.warnings) == 1
+    w = res.warnings[0]
+    mu = _mu_max_independent(spec, res.columns["q"][0])
+    assert spec.mission.dt * mu > 2
+    assert "imex" in w and "mission.dt" in w
+    # The quoted dt* is 2/μ_max.
+    assert f"{2 / mu:.4g}" in w
+    assert res.columns["dt_mu_max"][0] == pytest.approx(spec.mission.dt * mu, rel=1e-9)
+
+
+def test_guard_silent_under_imex(guard_runs):
+    _, res = guard_runs["imex_dt003"]
+    assert res.status == "complete"
+    assert res.warnings == []
+    # dt·μ_max is still above 2 (same dt, same gains): imex is what keeps the guard quiet.
+    assert res.columns["dt_mu_max"].min() > 2
+
+
+def test_guard_silent_under_explicit_small_dt(guard_runs):
+    spec, res = guard_runs["explicit_dt001"]
+    assert res.warnings == []
+    assert res.columns["dt_mu_max"].max() < 2
+    k = len(res.columns["t"]) // 2
+    mu = _mu_max_independent(spec, res.columns["q"][k])
+    assert res.columns["dt_mu_max"][k] == pytest.approx(spec.mission.dt * mu, rel=1e-9)
+
+
+# -- determinism -------------------------------------------------------------------------------
+
+def test_same_spec_twice_is_bitwise_identical():
+    spec = _three_seconds("short_nominal")
+    a = Mission(spec).run().columns
+    b = Mission(_three_seconds("short_nominal")).run().columns
+    assert a.keys() == b.keys()
+    for c in a:
+        assert a[c].dtype == b[c].dtype, c
+        assert np.array_equal(a[c], b[c]), c
+
+
+# -- the log written by run_spec ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def short_logs(tmp_path_factory):
+    """The three short missions (12 s) run once through run_spec into Parquet logs."""
+    out = tmp_path_factory.mktemp("logs")
+    logs = {}
+    for name in SHORT:
+        o = run_spec(load_spec(name), out)
+        assert o.status == "complete"
+        logs[name] = o.path
+    return logs
+
+
+REQUIRED = {"step": None, "t": None, "q": 13, "v": 12, "v_c": 3, "v_breve": 9, "s_min_G": None,
+            "kappa_G": None, "s_min_J": None, "kappa_J": None, "gamma": None, "dt_mu_max": None,
+            "pointing_err_deg": None, "boresight_err_deg": None, "coverage": None}
+
+
+def test_log_contract(short_logs):
+    path = short_logs["short_nominal"]
+    spec = load_spec("short_nominal")
+    assert path == path.parent.parent / "short_nominal" / "run.parquet"
+    cols = read_columns(path, [*REQUIRED, *LIMIT_FLAGS])
+    n = spec.n_steps
+    assert num_rows(path) == n == 400
+    for c, w in REQUIRED.items():
+        assert cols[c].shape == ((n,) if w is None else (n, w)), c
+    for c in LIMIT_FLAGS:
+        assert cols[c].dtype == bool, c
+    np.testing.assert_array_equal(cols["step"], np.arange(n))
+    np.testing.assert_allclose(cols["t"], np.arange(n) * spec.mission.dt, rtol=0, atol=1e-12)
+    meta = read_meta(path)
+    assert meta.status == "complete" and meta.failed_step is None
+    assert meta.spec_hash == spec.spec_hash
+    assert meta.spec == json.loads(json.dumps(spec.model_dump(mode="json")))
+    urdf = PROJECT_ROOT / meta.robot_file
+    assert urdf == spec.robot_path
+    assert meta.robot_hash == hashlib.sha256(urdf.read_bytes()).hexdigest()
+    assert len(meta.code_version) >= 8
+
+
+def test_log_is_a_consistent_trajectory(short_logs, robot):
+    """q_{k+1} = q_k ⊕ v_{k+1} dt; Γ(q_k) v_{k+1} = [v_c; v̆]_{k+1} (no clip); γ = ramp(s_min_G)."""
+    path = short_logs["short_omega_ripple_imex"]
+    spec = load_spec("short_omega_ripple_imex")
+    c = read_columns(path, ["q", "v", "v_c", "v_breve", "s_min_G", "gamma", "tau", "coverage",
+                            "sat_v_max"])
+    dt = spec.mission.dt
+    assert not c["sat_v_max"].any()
+    ramp = spec.controller.base.conditioning
+    for k in range(0, len(c["q"]) - 1, 37):
+        q_next = pin.integrate(robot.model, c["q"][k], c["v"][k + 1] * dt)
+        np.testing.assert_allclose(c["q"][k + 1], q_next, atol=1e-14)
+        G = robot.terms(c["q"][k], c["v"][k], dynamics=False).gamma
+        nu = np.concatenate([c["v_c"][k + 1], c["v_breve"][k + 1]])
+        np.testing.assert_allclose(G @ c["v"][k + 1], nu, atol=1e-10)
+        s = c["s_min_G"][k]
+        expected = 1.0 if s >= ramp.high else ramp.floor if s <= ramp.low else (
+            ramp.floor + (1 - ramp.floor) * (s - ramp.low) / (ramp.high - ramp.low))
+        assert c["gamma"][k] == pytest.approx(expected, abs=1e-15)
+        assert c["tau"][k + 1] == pytest.approx(c["tau"][k] + c["gamma"][k] * dt, abs=1e-12)
+    cov = c["coverage"]
+    assert np.all(np.diff(cov) >= 0) and 0 < cov[-1] <= 1
+
+
+# -- coverage ----------------------------------------------------------------------------------
+
+def _visible_brute_force(target, p_e, R_te, cam: Camera) -> np.ndarray:
+    """One point at a time, from the docstring: in the FOV cone (half-angle fov/2 about the
+    camera z-axis), depth along the boresight in [d_min, d_max], and the angle between the
+    outward normal and the direction from the point to the camera at most max_angle.
+    """
+    out = np.zeros(len(target.points), dtype=bool)
+    z = R_te[:, 2]
+    half = np.deg2rad(cam.fov_deg) / 2
+    for i, (p, n) in enumerate(zip(target.points, target.normals, strict=True)):
+        ray = p - p_e
+        dist = float(np.sqrt(ray @ ray))
+        depth = float(ray @ z)
+        off_axis = np.arccos(np.clip(depth / dist, -1.0, 1.0))
+        to_cam = -ray / dist
+        incidence = np.arccos(np.clip(n @ to_cam, -1.0, 1.0))
+        out[i] = (depth > 0 and off_axis <= half and cam.d_min <= depth <= cam.d_max
+                  and incidence <= np.deg2rad(cam.max_angle_deg))
+    return out
+
+
+def _pose_looking_at(rng, target_point, dist, jitter):
+    p_e = rng.standard_normal(3)
+    p_e = target_point + dist * p_e / np.linalg.norm(p_e)
+    z = target_point - p_e + jitter * rng.standard_normal(3)
+    z /= np.linalg.norm(z)
+    x = np.cross(z, rng.standard_normal(3))
+    x /= np.linalg.norm(x)
+    return p_e, np.column_stack([x, np.cross(z, x), z])
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_visible_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    target = build_target(Target(n_points=200, seed=seed))
+    cam = Camera(fov_deg=rng.uniform(20, 90), d_min=0.5, d_max=rng.uniform(3, 10),
+                 max_angle_deg=rng.uniform(30, 89))
+    seen_any, missed_any = 0, 0
+    for _ in range(20):
+        p_e, R = _pose_looking_at(rng, rng.uniform(-1, 1, 3), rng.uniform(1.5, 9), 0.3)
+        got = visible(target, p_e, R, cam)
+        expected = _visible_brute_force(target, p_e, R, cam)
+        np.testing.assert_array_equal(got, expected)
+        seen_any += expected.sum()
+        missed_any += (~expected).sum()
+    assert seen_any > 0 and missed_any > 0  # both outcomes exercised
+
+
+def test_each_visibility_condition_excludes(rng):
+    """A point dead ahead passes; moving it out of each condition alone removes it."""
+    from pipeline.sim.target import TargetGeometry
+
+    cam = Camera(fov_deg=40.0, d_min=0.5, d_max=10.0, max_angle_deg=75.0)
+    R = np.eye(3)  # boresight +z
+    facing = np.array([0.0, 0.0, -1.0])
+    tilted = np.array([np.sin(np.deg2rad(80)), 0.0, -np.cos(np.deg2rad(80))])
+    pts = np.array([[0, 0, 5.0], [0, 0, 0.3], [0, 0, 11.0], [5 * np.tan(np.deg2rad(25)), 0, 5.0],
+                    [0, 0, 5.0], [0, 0, -5.0]])
+    nrm = np.array([facing, facing, facing, facing, tilted, -facing])
+    got = visible(TargetGeometry(pts, nrm), np.zeros(3), R, cam)
+    np.testing.assert_array_equal(got, [True, False, False, False, False, False])
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_camera_looking_away_covers_nothing(seed):
+    rng = np.random.default_rng(seed)
+    target = build_target(Target(n_points=200, seed=seed))
+    cam = Camera()
+    p_e, R = _pose_looking_at(rng, np.zeros(3), rng.uniform(4, 9), 0.0)
+    assert visible(target, p_e, R, cam).any()  # facing the target: something is seen
+    R_away = R @ np.diag([1.0, -1.0, -1.0])  # turned 180° about x: boresight away
+    assert not visible(target, p_e, R_away, cam).any()
+
+
+def test_target_points_lie_on_the_geometry():
+    cfg = Target(n_points=300, seed=3)
+    tg = build_target(cfg)
+    assert tg.points.shape == tg.normals.shape == (300, 3)
+    np.testing.assert_allclose(np.linalg.norm(tg.normals, axis=1), 1.0, atol=1e-15)
+    half = np.asarray(cfg.bus_size) / 2
+    p = tg.points
+    on_box = np.all(np.abs(p) <= half + 1e-12, axis=1) & np.any(
+        np.isclose(np.abs(p), half, atol=1e-12), axis=1)
+    y0 = half[1]
+    on_panel = (np.isclose(p[:, 0], 0.0, atol=1e-12) & (np.abs(p[:, 1]) >= y0 - 1e-12)
+                & (np.abs(p[:, 1]) <= y0 + cfg.panel_span + 1e-12)
+                & (np.abs(p[:, 2]) <= cfg.panel_width / 2 + 1e-12))
+    assert np.all(on_box | on_panel)
+    assert on_box.sum() > 0 and on_panel.sum() > 0
+    # Box normals point outwards: normal · point > 0.
+    assert np.all(np.einsum("ij,ij->i", tg.normals[on_box], p[on_box]) > 0)
+
+
+# -- killed runs and atomic writes -------------------------------------------------------------
+
+def _stray_files(out: Path) -> list[Path]:
+    return [p for p in out.rglob("*") if p.is_file() and p.name != "run.parquet"]
+
+
+def _assert_no_stray_log(out: Path) -> None:
+    """Every leftover is either a hidden temp file (``.run.parquet.*.tmp``, not ``*.parquet``,
+    so no reader picks it up) or does not read as a log."""
+    for p in _stray_files(out):
+        if p.name.startswith(".") and p.name.endswith(".tmp"):
+            continue
+        with pytest.raises(LogError):
+            read_meta(p)
+
+
+def _kill_after(out: Path, delay: float) -> None:
+    p = subprocess.Popen([sys.executable, "-m", "pipeline", "run", "short_nominal", "--out",
+                          str(out)], cwd=PROJECT_ROOT, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    time.sleep(delay)
+    p.send_signal(signal.SIGKILL)
+    assert p.wait(timeout=30) == -signal.SIGKILL  # killed, not finished
+
+
+_DIE_BEFORE_RENAME = """
+import os, signal, sys
+import pipeline.logs as logs
+def die(*a, **k):
+    os.kill(os.getpid(), signal.SIGKILL)
+logs.os.replace = logs.os.rename = die
+from pipeline.cli import main
+sys.exit(main(["run", "short_nominal", "--out", sys.argv[1]]))
+"""
+
+
+def test_killed_run_leaves_no_complete_log_and_rerun_succeeds(tmp_path):
+    out = tmp_path / "logs"
+    log = out / "short_nominal" / "run.parquet"
+    # 1. Killed early (interpreter start-up / simulation): no log.
+    _kill_after(out, 0.5)
+    assert not log.exists()
+    if out.exists():
+        _assert_no_stray_log(out)
+    # 2. A rerun succeeds.
+    res = run_cli("run", "short_nominal", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    meta = read_meta(log)
+    assert meta.status == "complete" and num_rows(log) == 400
+    before = log.read_bytes()
+    # 3. Killed after the temporary file is fully written, just before the rename: the
+    #    earlier complete log is untouched.
+    p = subprocess.run([sys.executable, "-c", _DIE_BEFORE_RENAME, str(out)], cwd=PROJECT_ROOT,
+                       capture_output=True, timeout=120)
+    assert p.returncode == -signal.SIGKILL, p.stderr
+    assert log.read_bytes() == before
+    assert read_meta(log).status == "complete"
+    strays = _stray_files(out)
+    assert strays, "the kill should have left its temporary file behind"
+    assert all(s.name.startswith(".run.parquet.") and s.suffix == ".tmp" for s in strays)
+    _assert_no_stray_log(out)
+
+
+def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    import pipeline.logs as logs
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(logs.pq, "write_table", boom)
+    spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 0.3})
+    with pytest.raises(OSError, match="disk full"):
+        run_spec(spec, tmp_path)
+    assert [p for p in tmp_path.rglob("*") if p.is_file()] == []
+
+
+# -- non-finite state --------------------------------------------------------------------------
+
+def test_nan_state_stops_the_run_and_is_logged_failed(tmp_path, monkeypatch):
+    n_ok = 5
+    original = Mission.step
+    calls = {"n": 0}
+
+    def poisoned(self, s):
+        nxt, row = original(self, s)
+        calls["n"] += 1
+        if calls["n"] > n_ok:
+            nxt.v = nxt.v.copy()
+            nxt.v[4] = np.nan
+        return nxt, row
+
+    monkeypatch.setattr(Mission, "step", poisoned)
+    spec = _three_seconds("short_nominal")
+    with pytest.raises(RunFailed, match="failed"):
+        run_spec(spec, tmp_path)
+    log = tmp_path / "short_nominal" / "run.parquet"
+    meta = read_meta(log)
+    assert meta.status == "failed"
+    assert meta.failed_step == n_ok
+    assert "non-finite" in meta.error
+    cols = read_columns(log, ["step", "v", "q"])
+    np.testing.assert_array_equal(cols["step"], np.arange(n_ok))
+    assert np.all(np.isfinite(cols["v"])) and np.all(np.isfinite(cols["q"]))
+
+
+def test_diverging_spec_fails_via_cli_with_exit_1(tmp_path):
+    """dt 0.5 with the limits out of the way: forward Euler diverges within a few steps."""
+    limits = ", ".join(f"{k}: 1.0e+150" for k in Limits.model_fields)
+    (tmp_path / "diverge.yaml").write_text(
+        f"extends: short_nominal\nmission: {{dt: 0.5, duration: 20.0}}\n"
+        f"controller: {{limits: {{{limits}}}}}\n")
+    out = tmp_path / "out"
+    res = run_cli("run", str(tmp_path / "diverge.yaml"), "--out", str(out))
+    assert res.returncode == 1, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.stderr
+    assert "diverge" in lines[0] and "failed" in lines[0]
+    log = out / "diverge" / "run.parquet"
+    meta = read_meta(log)
+    assert meta.status == "failed"
+    assert meta.failed_step is not None and 0 < meta.failed_step < 40
+    assert num_rows(log) == meta.failed_step
+
+
+def test_overflowing_divergence_stops_the_run():
+    """dt 0.1, limits 1e150: forward Euler grows by ~|1 − dt·μ| per step until the norms in the
+    saturations overflow. That must stop the run (status failed, rows cut at the failing step),
+    never be absorbed: e.g. sat(x) = x·bound/‖x‖ with ‖x‖ = inf silently returns 0 and lets a
+    run with |v| ~ 1e53 finish as "complete". (At the committed code: failed at step 10 with
+    "FloatingPointError: overflow encountered in matmul".)
+    """
+    limits = {f"controller.limits.{k}": 1e150 for k in Limits.model_fields}
+    spec = with_overrides(load_spec("short_nominal"), {"mission.dt": 0.1, **limits})
+    res = Mission(spec).run()
+    assert res.status == "failed"
+    assert res.failed_step is not None
+    assert res.error.startswith(f"step {res.failed_step}: ")
+    assert len(res.columns["t"]) == res.failed_step
+
+
+# -- physics of the ripple on the short missions -----------------------------------------------
+
+def _r1(x: np.ndarray) -> float:
+    x = x - x.mean()
+    return float(x[:-1] @ x[1:] / (x @ x))
+
+
+def _dominant_r1(X: np.ndarray) -> float:
+    """r₁ of X projected on the first right-singular vector of its step-to-step differences."""
+    _, _, Vt = np.linalg.svd(np.diff(X, axis=0), full_matrices=False)
+    return _r1(X @ Vt[0])
+
+
+def _window(path: Path, cols: list[str]) -> dict[str, np.ndarray]:
+    n = num_rows(path)
+    return read_columns(path, cols, start=n // 2)
+
+
+def test_r1_closed_forms():
+    k = np.arange(400)
+    assert _r1((-1.0) ** k) == pytest.approx(-1.0, abs=1e-2)
+    assert _r1(np.sin(2 * np.pi * k / 400)) > 0.99
+
+
+def test_ripple_in_v_breve_at_nominal_only(short_logs):
+    r = {n: _dominant_r1(_window(p, ["v_breve"])["v_breve"]) for n, p in short_logs.items()}
+    # Measured: nominal −0.995, dt010 +0.995, imex +0.986.
+    assert r["short_nominal"] < -0.5, r
+    assert r["short_omega_ripple_dt010"] > 0.9, r
+    assert r["short_omega_ripple_imex"] > 0.9, r
+
+
+def test_ripple_is_the_camera_roll(short_logs):
+    """The nominal dominant step-to-step direction is ν_e,ang,z (component 8 of v̆)."""
+    vb = _window(short_logs["short_nominal"], ["v_breve"])["v_breve"]
+    _, _, Vt = np.linalg.svd(np.diff(vb, axis=0), full_matrices=False)
+    assert abs(Vt[0][8]) > 0.99
+    assert _r1(vb[:, 8]) < -0.9
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "In this model the bus angular rate does not carry the ripple: the unstable mode is the "
+    "camera roll about its boresight (dt·μ_max ≈ 2.95 from the 0.01 kg·m² roll inertia), "
+    "which the Giordano coordinates decouple from ω_b. Measured on short_nominal: ω_b's "
+    "alternating (second-difference) amplitude ~8e-7 rad/s against a smooth variation "
+    "~4e-3 rad/s, so r₁ of ω_b's dominant component is ≈ +0.986, not < −0.5."))
+def test_ripple_in_bus_angular_rate_at_nominal(short_logs):
+    w = _window(short_logs["short_nominal"], ["v_breve"])["v_breve"][:, :3]
+    assert _dominant_r1(w) < -0.5
+
+
+def test_bus_angular_rate_is_smooth_in_all_three(short_logs):
+    """The measured counterpart of the xfail above: ω_b is smooth (r₁ > 0.9) in every run."""
+    for name, path in short_logs.items():
+        w = _window(path, ["v_breve"])["v_breve"][:, :3]
+        assert _dominant_r1(w) > 0.9, name
+
+
+def test_pointing_and_coverage_agree_across_the_three(short_logs):
+    cov = {}
+    for name, path in short_logs.items():
+        c = read_columns(path, ["t", "pointing_err_deg", "coverage"])
+        assert c["pointing_err_deg"][c["t"] >= 2.0].max() < 1.0, name
+        cov[name] = c["coverage"][-1]
+    assert max(cov.values()) - min(cov.values()) <= 0.02, cov
+    assert min(cov.values()) > 0.05, cov
+
