@@ -11,31 +11,37 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.jit import jit
-from pipeline.sim.limits import saturate_breve
+from pipeline.sim.limits import BREVE_BLOCKS, breve_bounds, saturate_blocks
 from pipeline.spec import Limits
 
 
+@jit
 def coriolis_term(C_breve: np.ndarray, v_breve: np.ndarray) -> np.ndarray:
     """−C̆ v̆ (eq. 13a)."""
-    return -C_breve @ v_breve
+    return -(np.ascontiguousarray(C_breve) @ v_breve)
 
 
+@jit
 def damping_term(D_breve: np.ndarray, v_breve: np.ndarray, v_breve_des: np.ndarray) -> np.ndarray:
     """−D̆ (v̆ − v̆_des) (eq. 13b)."""
-    return -D_breve @ (v_breve - v_breve_des)
+    return -(np.ascontiguousarray(D_breve) @ (v_breve - v_breve_des))
 
 
+@jit
 def stiffness_term(J_x: np.ndarray, K_breve: np.ndarray, x_tilde: np.ndarray) -> np.ndarray:
     """−J_xᵀ K̆ x̃ (eq. 13c)."""
-    return -J_x.T @ (K_breve @ x_tilde)
+    return -(np.ascontiguousarray(J_x.T) @ (np.ascontiguousarray(K_breve) @ x_tilde))
 
 
+@jit
 def com_coupling_term(C_c: np.ndarray, D_breve: np.ndarray, G_vc: np.ndarray,
                       com_vel_err: np.ndarray) -> np.ndarray:
     """−(C_c + D̆ G_vc) ẋ̃_c (eq. 13d): CoM velocity error seen by the camera loop."""
-    return -(C_c + D_breve @ G_vc) @ com_vel_err
+    D = np.ascontiguousarray(D_breve)
+    return -((np.ascontiguousarray(C_c) + D @ np.ascontiguousarray(G_vc)) @ com_vel_err)
 
 
+@jit
 def posture_term(gamma_inv: np.ndarray, k_posture: float, q_joint: np.ndarray,
                  q_bar: np.ndarray) -> np.ndarray:
     """Joint posture spring mapped into the reduced coordinates (eq. 13e).
@@ -43,35 +49,75 @@ def posture_term(gamma_inv: np.ndarray, k_posture: float, q_joint: np.ndarray,
     The joint-space force τ = [0; 0; −k (q − q̄)] is a covector, so it maps as F̂ = Γ⁻ᵀ τ; the
     reduced rows are F̂[3:] = −(Γ⁻¹[6:, 3:])ᵀ k (q − q̄).
     """
-    return -gamma_inv[6:, 3:].T @ (k_posture * (q_joint - q_bar))
+    P_T = np.ascontiguousarray(gamma_inv[6:, 3:].T)
+    return -(P_T @ (k_posture * (q_joint - q_bar)))
 
 
+@jit
 def feedforward_term(M_breve: np.ndarray, v_breve_dot_des: np.ndarray, C_breve: np.ndarray,
                      v_breve_des: np.ndarray) -> np.ndarray:
     """FF = M̆ v̆̇_des + C̆ v̆_des (eq. 13f)."""
-    return M_breve @ v_breve_dot_des + C_breve @ v_breve_des
+    return (np.ascontiguousarray(M_breve) @ v_breve_dot_des
+            + np.ascontiguousarray(C_breve) @ v_breve_des)
 
 
-def explicit_step(M_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray, dt: float,
-                  lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
-    """Forward Euler (eq. 15a): v̆⁺ = sat(v̆ + dt · sat(M̆⁻¹ RHS))."""
-    acc, f_acc = saturate_breve(np.linalg.solve(M_breve, rhs), lim, "acc")
-    v_new, f_rate = saturate_breve(v_breve + dt * acc, lim, "rate")
-    return v_new, f_acc | f_rate
+@jit
+def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_des, v_breve_dot_des, J_x,
+              K_breve, x_tilde, D_breve, G_vc, com_vel_err, k_posture, q_joint, q_bar):
+    """RHS of eq. 13: the sum of its named terms."""
+    return (coriolis_term(C_breve, v_breve)
+            + damping_term(D_breve, v_breve, v_breve_des)
+            + stiffness_term(J_x, K_breve, x_tilde)
+            + com_coupling_term(C_c, D_breve, G_vc, com_vel_err)
+            + posture_term(gamma_inv, k_posture, q_joint, q_bar)
+            + feedforward_term(M_breve, v_breve_dot_des, C_breve, v_breve_des))
 
 
-def imex_step(M_breve: np.ndarray, D_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray,
-              dt: float, lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
+@jit
+def explicit_update(M_breve, rhs, v_breve, dt, acc_bounds, rate_bounds):
+    """Forward Euler (eq. 15a): v̆⁺ = sat(v̆ + dt · sat(M̆⁻¹ RHS)); which blocks saturated."""
+    acc, hit_acc = saturate_blocks(np.linalg.solve(np.ascontiguousarray(M_breve), rhs),
+                                   acc_bounds)
+    v_new, hit_rate = saturate_blocks(v_breve + dt * acc, rate_bounds)
+    return v_new, hit_acc, hit_rate
+
+
+@jit
+def imex_update(M_breve, D_breve, rhs, v_breve, dt, acc_bounds, rate_bounds):
     """Damping implicit (eq. 15b): (M̆ + dt D̆) v̆⁺ = M̆ v̆ + dt (RHS + D̆ v̆), same limits.
 
     The implicit solution defines an acceleration (v̆⁺ − v̆)/dt that passes through the same
     acceleration and rate saturations as the explicit step.
     """
-    v_raw = np.linalg.solve(M_breve + dt * D_breve,
-                            M_breve @ v_breve + dt * (rhs + D_breve @ v_breve))
-    acc, f_acc = saturate_breve((v_raw - v_breve) / dt, lim, "acc")
-    v_new, f_rate = saturate_breve(v_breve + dt * acc, lim, "rate")
-    return v_new, f_acc | f_rate
+    M = np.ascontiguousarray(M_breve)
+    D = np.ascontiguousarray(D_breve)
+    v_implicit = np.linalg.solve(M + dt * D, M @ v_breve + dt * (rhs + D @ v_breve))
+    acc, hit_acc = saturate_blocks((v_implicit - v_breve) / dt, acc_bounds)
+    v_new, hit_rate = saturate_blocks(v_breve + dt * acc, rate_bounds)
+    return v_new, hit_acc, hit_rate
+
+
+def _flags(hit_acc: np.ndarray, hit_rate: np.ndarray) -> dict[str, bool]:
+    return ({f"sat_{name}_acc": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit_acc,
+                                                               strict=True)}
+            | {f"sat_{name}_rate": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit_rate,
+                                                                  strict=True)})
+
+
+def explicit_step(M_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray, dt: float,
+                  lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
+    """Forward Euler (eq. 15a), with the spec's limits; the flags of the limits that bound."""
+    v_new, hit_acc, hit_rate = explicit_update(M_breve, rhs, v_breve, dt,
+                                               breve_bounds(lim, "acc"), breve_bounds(lim, "rate"))
+    return v_new, _flags(hit_acc, hit_rate)
+
+
+def imex_step(M_breve: np.ndarray, D_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray,
+              dt: float, lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
+    """Damping implicit (eq. 15b), with the spec's limits; the flags of the limits that bound."""
+    v_new, hit_acc, hit_rate = imex_update(M_breve, D_breve, rhs, v_breve, dt,
+                                           breve_bounds(lim, "acc"), breve_bounds(lim, "rate"))
+    return v_new, _flags(hit_acc, hit_rate)
 
 
 INTEGRATORS = {"explicit": explicit_step, "imex": imex_step}

@@ -50,5 +50,5 @@ def breve_bounds(lim: Limits, kind: str) -> np.ndarray:
 def saturate_breve(x: np.ndarray, lim: Limits, kind: str) -> tuple[np.ndarray, dict[str, bool]]:
     """Block-wise saturation of a 9-vector of rates (``kind='rate'``) or accelerations."""
     out, hit = saturate_blocks(x, breve_bounds(lim, kind))
-    return out, {f"sat_{name}_{kind}": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit,
-                                                                          strict=True)}
+    return out, {f"sat_{name}_{kind}": bool(h)
+                 for (name, _), h in zip(BREVE_BLOCKS, hit, strict=True)}

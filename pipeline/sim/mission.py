@@ -21,9 +21,9 @@ from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
 from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import BaseGuidance, Reference
-from pipeline.sim.com_controller import com_step
+from pipeline.sim.com_controller import com_update
 from pipeline.sim.jit import jit
-from pipeline.sim.limits import LIMIT_FLAGS
+from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import attitude_error, quat_from_matrix
 from pipeline.sim.target import build_target, visible
@@ -99,6 +99,49 @@ def task_error_terms(R_tb, R_te, p_e, p_c, R_b_des, R_e_des, p_e_des, p_c_des, w
     return x, J_x, v_des, G_vc, v_c - gamma * v_c_des, p_c - p_c_des
 
 
+@jit
+def loop_update(R_tb, R_te, p_e, p_c, M_hat, C_hat, gamma_inv,
+                R_b_des, R_e_des, p_e_des, p_c_des, w_b_des, v_e_des, v_c_des, w_e_des, a_c_des,
+                gamma, v_c, v_breve, v_breve_des_prev, has_prev, integral, q_joint,
+                K_breve, D_breve, k_posture, q_bar, imex, dt, acc_bounds, rate_bounds,
+                com_K, com_D, com_Ki, com_i_max, com_acc_bound, com_rate_bound, v_max):
+    """Both loops of one step and the velocity reconstruction (eqs. 12–16).
+
+    Task errors (eq. 14), the breve RHS (eq. 13) and its step (eq. 15a or 15b), μ_max of
+    M̆⁻¹D̆ (eq. 21), the CoM step (eq. 12), then v = clip(Γ⁻¹ [v_c; v̆], ±v_max) (eq. 16).
+    Returns the new v, v_c, v̆ and CoM integral, x̃, v̆_des, μ_max, the limit flags in the
+    order of ``LIMIT_FLAGS`` and the CoM position error.
+    """
+    x_tilde, J_x, v_des, G_vc, com_vel_err, com_pos_err = task_error_terms(
+        R_tb, R_te, p_e, p_c, R_b_des, R_e_des, p_e_des, p_c_des, w_b_des, v_e_des, v_c_des,
+        w_e_des, gamma, v_c)
+    v_dot_des = (v_des - v_breve_des_prev) / dt if has_prev else np.zeros(9)
+    M_breve = np.ascontiguousarray(M_hat[3:, 3:])
+    C_breve = np.ascontiguousarray(C_hat[3:, 3:])
+    rhs = bc.breve_rhs(M_breve, C_breve, C_hat[3:, :3], gamma_inv, v_breve, v_des, v_dot_des,
+                       J_x, K_breve, x_tilde, D_breve, G_vc, com_vel_err, k_posture, q_joint,
+                       q_bar)
+    mu_max = bc.damping_rates(M_breve, D_breve)[-1]
+    if imex:
+        v_b_new, hit_acc, hit_rate = bc.imex_update(M_breve, D_breve, rhs, v_breve, dt,
+                                                    acc_bounds, rate_bounds)
+    else:
+        v_b_new, hit_acc, hit_rate = bc.explicit_update(M_breve, rhs, v_breve, dt, acc_bounds,
+                                                        rate_bounds)
+    v_c_new, integral_new, sat_c_acc, sat_c_rate = com_update(
+        com_pos_err, com_vel_err, v_c, gamma * gamma * a_c_des, integral, com_K, com_D, com_Ki,
+        com_i_max, com_acc_bound, com_rate_bound, dt)
+    nu = np.empty(12)
+    nu[0:3] = v_c_new
+    nu[3:12] = v_b_new
+    v_raw = np.ascontiguousarray(gamma_inv) @ nu
+    sat_v_max = np.any(np.abs(v_raw) > v_max)
+    v_new = np.minimum(np.maximum(v_raw, -v_max), v_max)
+    hits = np.array([hit_acc[0], hit_rate[0], hit_acc[1], hit_rate[1], hit_acc[2], hit_rate[2],
+                     sat_c_acc, sat_c_rate, sat_v_max])
+    return (v_new, v_c_new, v_b_new, integral_new, x_tilde, v_des, mu_max, hits, com_pos_err)
+
+
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle between two vectors in degrees (eq. 18's pointing and boresight errors)."""
     c = float(a @ b) / math.sqrt(float(a @ a) * float(b @ b))
@@ -113,9 +156,9 @@ class Mission:
         self.robot = robot or GiordanoRobot(spec)
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
-        self.step_breve = bc.INTEGRATORS[spec.controller.integrator]
         # Without the bus derate the gains do not depend on γ: build them once.
         self.gains = None if spec.controller.base.derate.gain else block_gains(spec.controller, 1.0)
+        self._zero9 = np.zeros(9)
         q_start = self.robot.start_configuration()
         T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
@@ -136,18 +179,6 @@ class Mission:
         v0 = T0.gamma_inv @ np.concatenate([v_c0, np.zeros(9)])
         return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(9))
 
-    def breve_rhs(self, T: Terms, err: TaskErrors, K: np.ndarray, D: np.ndarray,
-                  s: LoopState, v_breve_dot_des: np.ndarray) -> np.ndarray:
-        """RHS of eq. 13: the sum of its named terms."""
-        C_breve, M_breve = T.reduced_coriolis, T.reduced_inertia
-        return (bc.coriolis_term(C_breve, s.v_breve)
-                + bc.damping_term(D, s.v_breve, err.v_breve_des)
-                + bc.stiffness_term(err.J_x, K, err.x_tilde)
-                + bc.com_coupling_term(T.com_coupling, D, err.G_vc, err.com_vel_err)
-                + bc.posture_term(T.gamma_inv, self.spec.controller.gains.posture,
-                                  s.q[7:], self.robot.q_bar)
-                + bc.feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
-
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
         the guard's dt·μ_max of eq. 21): the next state and the row to log."""
@@ -155,40 +186,30 @@ class Mission:
         T = self.robot.terms(s.q, s.v)
         gamma = conditioning_scale(T.s_min_G, ctrl)
         ref = self.guidance.reference(s.tau, T.p_b)
-        err = task_errors(T, ref, gamma, s.v_c)
         K, D = self.gains if self.gains is not None else block_gains(ctrl, gamma)
-        M_breve = T.reduced_inertia
         prev = s.v_breve_des_prev
-        v_dot_des = np.zeros(9) if prev is None else (err.v_breve_des - prev) / dt
-        rhs = self.breve_rhs(T, err, K, D, s, v_dot_des)
-        mu_max = float(bc.damping_rates(M_breve, D)[-1])
-
-        if ctrl.integrator == "imex":
-            v_breve, flags = self.step_breve(M_breve, D, rhs, s.v_breve, dt, ctrl.limits)
-        else:
-            v_breve, flags = self.step_breve(M_breve, rhs, s.v_breve, dt, ctrl.limits)
-        com = com_step(err.com_pos_err, err.com_vel_err, s.v_c, gamma**2 * ref.a_c, s.integral,
-                       ctrl.com, ctrl.limits, dt)
-        v_raw = T.gamma_inv @ np.concatenate([com.v_c, v_breve])
-        v_max = ctrl.limits.v_max
-        v_new = np.clip(v_raw, -v_max, v_max)
-        flags |= {"sat_v_c_acc": com.sat_acc, "sat_v_c_rate": com.sat_rate,
-                  "sat_v_max": bool(np.any(np.abs(v_raw) > v_max))}
-
+        lim, com = ctrl.limits, ctrl.com
+        (v_new, v_c, v_breve, integral, x_tilde, v_des, mu_max, hits,
+         com_pos_err) = loop_update(
+            T.R_tb, T.R_te, T.p_e, T.p_c, T.M_hat, T.C_hat, T.gamma_inv,
+            ref.R_b, ref.R_e, ref.p_e, ref.p_c, ref.w_b, ref.v_e, ref.v_c, ref.w_e, ref.a_c,
+            gamma, s.v_c, s.v_breve, self._zero9 if prev is None else prev, prev is not None,
+            s.integral, s.q[7:], K, D, ctrl.gains.posture, self.robot.q_bar,
+            ctrl.integrator == "imex", dt, breve_bounds(lim, "acc"), breve_bounds(lim, "rate"),
+            com.K, com.D, com.Ki, com.i_max, lim.v_c_acc, lim.v_c_rate, lim.v_max)
         row = {
             "tau": s.tau, "q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve,
-            "v_breve_des": err.v_breve_des, "x_tilde": err.x_tilde,
+            "v_breve_des": v_des, "x_tilde": x_tilde,
             "s_min_G": T.s_min_G, "kappa_G": T.kappa_G, "s_min_J": T.s_min_J,
             "kappa_J": T.kappa_J, "gamma": gamma, "dt_mu_max": dt * mu_max,
             "pointing_err_deg": angle_deg(T.R_tb[:, 2], -T.p_b),
             "boresight_err_deg": angle_deg(T.R_te[:, 2], ref.aim - T.p_e),
-            "com_err": math.sqrt(float(err.com_pos_err @ err.com_pos_err)),
-            "_p_e": T.p_e, "_R_te": T.R_te, **flags,
+            "com_err": math.sqrt(float(com_pos_err @ com_pos_err)),
+            "_p_e": T.p_e, "_R_te": T.R_te, **dict(zip(LIMIT_FLAGS, hits, strict=True)),
         }
         q_new = pin.integrate(self.robot.model, s.q, v_new * dt)
-        nxt = LoopState(q=q_new, v=v_new, v_c=com.v_c, v_breve=v_breve,
-                        tau=s.tau + gamma * dt, integral=com.integral,
-                        v_breve_des_prev=err.v_breve_des)
+        nxt = LoopState(q=q_new, v=v_new, v_c=v_c, v_breve=v_breve, tau=s.tau + gamma * dt,
+                        integral=integral, v_breve_des_prev=v_des)
         return nxt, row
 
     def run(self, progress: bool = False) -> MissionResult:
@@ -202,12 +223,12 @@ class Mission:
         seen = np.zeros(len(self.target.points), dtype=bool)
         s = self.initial_state()
         warned: list[str] = []
-        with tqdm(total=n, disable=not progress, unit="step", mininterval=0.5,
-                  desc=self.spec.name) as bar:
+        # Overflow shows as a non-finite state, caught below at the step it happens.
+        with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
+                                             mininterval=0.5, desc=self.spec.name) as bar:
             for k in range(n):
                 try:
-                    with np.errstate(all="raise"):
-                        s_next, row = self.step(s)
+                    s_next, row = self.step(s)
                     finite = all(np.all(np.isfinite(x)) for x in
                                  (s_next.q, s_next.v, s_next.v_breve, s_next.v_c))
                 except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
