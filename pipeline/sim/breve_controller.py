@@ -120,7 +120,6 @@ def imex_step(M_breve: np.ndarray, D_breve: np.ndarray, rhs: np.ndarray, v_breve
     return v_new, _flags(hit_acc, hit_rate)
 
 
-INTEGRATORS = {"explicit": explicit_step, "imex": imex_step}
 
 
 @jit
