@@ -46,8 +46,13 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(PY) -m ruff check pipeline tests
 
+# The default dt sweep (claim C12): nominal, 20 s missions, dt from 0.005 to 0.04 s across
+# dt* ≈ 0.0204 s -> $(REPORTS)/sweeps/nominal_dt/sweep.parquet. See docs/sweeps.md.
+SWEEP_DTS := 0.005,0.01,0.015,0.0175,0.02,0.0225,0.025,0.03,0.04
+SWEEP_WORKERS ?= 2
 sweep: $(STAMP)
-	$(PY) -m pipeline sweep nominal --set mission.dt=0.005,0.01,0.015,0.0175,0.02,0.0225,0.025,0.03,0.04 --set mission.duration=20 --workers 2
+	$(PY) -m pipeline sweep nominal --set mission.dt=$(SWEEP_DTS) --set mission.duration=20 \
+		--workers $(SWEEP_WORKERS) --name nominal_dt --logs $(LOGS)/sweeps --out $(REPORTS)/sweeps
 
 bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)

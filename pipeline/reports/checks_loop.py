@@ -1,0 +1,274 @@
+"""Checks of the loop equations (eqs. 12–18): each RHS term against its formula, both
+integrators against their closed forms, the saturations, the guidance and the coverage.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from pipeline.reports.checks_base import Outcome, check, fmt, maxdiff, random_state, rng, robot
+from pipeline.reports.checks_base import spec as check_spec
+from pipeline.spec import Limits
+
+BIG = Limits(omega_b_rate=1e9, omega_b_acc=1e9, nu_e_lin_rate=1e9, nu_e_lin_acc=1e9,
+             nu_e_ang_rate=1e9, nu_e_ang_acc=1e9, v_c_rate=1e9, v_c_acc=1e9, v_max=1e9)
+
+
+def _spd(g: np.random.Generator, n: int = 9) -> np.ndarray:
+    A = g.standard_normal((n, n))
+    return A @ A.T + n * np.eye(n)
+
+
+def _loop_inputs(salt: int) -> dict:
+    """A real state's reduced terms and random loop quantities (x̃, J_x, v̆_des, …)."""
+    q, v = random_state(salt)
+    T = robot().terms(q, v)
+    g = rng(100 + salt)
+    return {"C": np.array(T.reduced_coriolis), "M": np.array(T.reduced_inertia),
+            "G": np.array(T.gamma),
+            "C_c": np.array(T.com_coupling), "Gi": np.array(T.gamma_inv), "q": q,
+            "D": np.diag(g.uniform(0.5, 8, 9)), "K": np.diag(g.uniform(0.5, 4, 9)),
+            "J_x": g.standard_normal((9, 9)), "x": g.standard_normal(9),
+            "vb": g.standard_normal(9), "vd": g.standard_normal(9),
+            "vdd": g.standard_normal(9), "G_vc": g.standard_normal((9, 3)),
+            "xc": g.standard_normal(3)}
+
+
+def _rows(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x by explicit sums over rows (independent of the @ operator)."""
+    return np.array([sum(A[i, j] * x[j] for j in range(A.shape[1])) for i in range(A.shape[0])])
+
+
+_TERM_TEXT = "terms of a random state (seed {s}); random D̆, K̆, J_x, x̃, v̆, v̆_des"
+
+
+@check("13a", "Coriolis term −C̆ v̆", "pipeline.sim.breve_controller.coriolis_term")
+def _coriolis() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(1)
+    return Outcome(_TERM_TEXT.format(s=1),
+                   maxdiff(bc.coriolis_term(d["C"], d["vb"]), -_rows(d["C"], d["vb"])), 1e-12)
+
+
+@check("13b", "damping term −D̆ (v̆ − v̆_des)", "pipeline.sim.breve_controller.damping_term")
+def _damping() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(2)
+    ref = -_rows(d["D"], d["vb"] - d["vd"])
+    return Outcome(_TERM_TEXT.format(s=2), maxdiff(bc.damping_term(d["D"], d["vb"], d["vd"]), ref),
+                   1e-12)
+
+
+@check("13c", "stiffness term −J_xᵀ K̆ x̃", "pipeline.sim.breve_controller.stiffness_term")
+def _stiffness() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(3)
+    ref = -_rows(d["J_x"].T, _rows(d["K"], d["x"]))
+    return Outcome(_TERM_TEXT.format(s=3),
+                   maxdiff(bc.stiffness_term(d["J_x"], d["K"], d["x"]), ref), 1e-12)
+
+
+@check("13d", "CoM coupling −(C_c + D̆ G_vc) ẋ̃_c", "pipeline.sim.breve_controller.com_coupling_term")
+def _com_coupling() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(4)
+    ref = -_rows(d["C_c"], d["xc"]) - _rows(d["D"], _rows(d["G_vc"], d["xc"]))
+    got = bc.com_coupling_term(d["C_c"], d["D"], d["G_vc"], d["xc"])
+    return Outcome(_TERM_TEXT.format(s=4), maxdiff(got, ref), 1e-12)
+
+
+@check("13e", "posture term vs rows 3: of Γ⁻ᵀ τ, τ = [0; 0; −k (q_a − q̄)] (numpy's Γ⁻ᵀ)",
+       "pipeline.sim.breve_controller.posture_term")
+def _posture() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(5)
+    k, q_bar = 0.7, np.asarray(robot().q_bar)
+    tau = np.r_[np.zeros(6), -k * (d["q"][7:] - q_bar)]
+    ref = np.linalg.solve(d["G"].T, tau)[3:]  # Γ⁻ᵀ τ without the closed-form inverse
+    got = bc.posture_term(d["Gi"], k, d["q"][7:], q_bar)
+    return Outcome(_TERM_TEXT.format(s=5) + f", k_post = {k}", maxdiff(got, ref), 1e-12)
+
+
+@check("13f", "feed-forward M̆ v̆̇_des + C̆ v̆_des", "pipeline.sim.breve_controller.feedforward_term")
+def _feedforward() -> Outcome:
+    from pipeline.sim import breve_controller as bc
+
+    d = _loop_inputs(6)
+    ref = _rows(d["M"], d["vdd"]) + _rows(d["C"], d["vd"])
+    got = bc.feedforward_term(d["M"], d["vdd"], d["C"], d["vd"])
+    return Outcome(_TERM_TEXT.format(s=6), maxdiff(got, ref), 1e-12)
+
+
+@check("13", "block gains K̆, D̆ = blockdiag(s k_b I₃, k_p I₃, k_o I₃), s = γ only when derated",
+       "pipeline.sim.base_controller.block_gains")
+def _block_gains() -> Outcome:
+    from pipeline.sim.base_controller import block_gains
+    from pipeline.spec import with_overrides
+
+    diffs = []
+    for derate in (False, True):
+        c = with_overrides(check_spec(), {"controller.base.derate.gain": derate}).controller
+        g, gam = c.gains, 0.4
+        s = gam if derate else 1.0
+        K, D = block_gains(c, gam)
+        K_ref = sla.block_diag(s * g.bus.K * np.eye(3), g.cam_pos.K * np.eye(3),
+                               g.cam_ori.K * np.eye(3))
+        D_ref = sla.block_diag(s * g.bus.D * np.eye(3), g.cam_pos.D * np.eye(3),
+                               g.cam_ori.D * np.eye(3))
+        diffs += [maxdiff(K, K_ref), maxdiff(D, D_ref)]
+    return Outcome("spec gains, γ = 0.4, derate.gain false and true", max(diffs), 0.0)
+
+
+@check("12", "CoM step vs the PD + bounded integral + feed-forward law with both saturations",
+       "pipeline.sim.com_controller.com_step")
+def _com_step() -> Outcome:
+    from pipeline.sim.com_controller import com_step
+
+    c, g, dt = check_spec().controller, rng(12), 0.03
+    diffs = []
+    for scale in (1e-3, 10.0):  # saturations inactive, then active
+        x, xd, vc, a_ff, integ = (scale * g.standard_normal(3) for _ in range(5))
+        out = com_step(x, xd, vc, a_ff, integ, c.com, c.limits, dt)
+        i_ref = np.minimum(np.maximum(integ + dt * x, -c.com.i_max), c.com.i_max)
+        acc = -c.com.K * x - c.com.D * xd - c.com.Ki * i_ref + a_ff
+        acc = acc * min(1.0, c.limits.v_c_acc / np.sqrt(acc @ acc))
+        v_new = vc + dt * acc
+        v_new = v_new * min(1.0, c.limits.v_c_rate / np.sqrt(v_new @ v_new))
+        diffs += [maxdiff(out.v_c, v_new), maxdiff(out.integral, i_ref)]
+    return Outcome("random errors at scales 1e-3 and 10 (limits inactive, active), dt 0.03",
+                   max(diffs), 1e-14)
+
+
+@check("14", "attitude error 2ε of quat(R_desᵀR) vs an axis-angle construction; "
+       "d(2ε)/dt = E ω by finite differences", "pipeline.sim.rotations.attitude_error")
+def _attitude_error() -> Outcome:
+    import pinocchio as pin
+
+    from pipeline.sim.rotations import attitude_error
+
+    g, diffs = rng(14), []
+    for _ in range(5):
+        axis = g.standard_normal(3)
+        axis /= np.linalg.norm(axis)
+        angle = g.uniform(0.1, 2.5)
+        R_des = pin.exp3(g.standard_normal(3))
+        R = R_des @ pin.exp3(angle * axis)
+        x, E = attitude_error(R, R_des)
+        diffs.append(maxdiff(x, 2 * np.sin(angle / 2) * axis))
+        w, h = g.standard_normal(3), 1e-6
+        xp, _ = attitude_error(R @ pin.exp3(h * w), R_des)
+        xm, _ = attitude_error(R @ pin.exp3(-h * w), R_des)
+        diffs.append(maxdiff((xp - xm) / (2 * h), E @ w))
+    return Outcome("5 random error rotations (angle 0.1–2.5 rad) and body rates; h = 1e-6",
+                   max(diffs), 1e-6)
+
+
+@check("15a", "explicit step vs v̆ + dt M̆⁻¹RHS (limits off) and the scalar closed form "
+       "v⁺ − v_des = (1 − dt d/m)(v − v_des)", "pipeline.sim.breve_controller.explicit_step")
+def _explicit() -> Outcome:
+    from pipeline.sim.breve_controller import explicit_step
+
+    g, dt = rng(15), 0.03
+    M, rhs, v = _spd(g), g.standard_normal(9), g.standard_normal(9)
+    d1 = maxdiff(explicit_step(M, rhs, v, dt, BIG)[0], v + dt * sla.inv(M) @ rhs)
+    m, dd, vdes = 2.0, 150.0, g.standard_normal(9)
+    v1, _ = explicit_step(m * np.eye(9), -dd * (v - vdes), v, dt, BIG)
+    d2 = maxdiff(v1 - vdes, (1 - dt * dd / m) * (v - vdes))
+    return Outcome("random SPD M̆ and RHS; scalar mode m = 2, d = 150 (dt·d/m = 2.25), dt 0.03",
+                   max(d1, d2), 1e-12, f"matrix {fmt(d1)}, scalar {fmt(d2)}")
+
+
+@check("15b", "imex step vs (M̆ + dt D̆)⁻¹(M̆v̆ + dt(RHS + D̆v̆)) and the scalar closed form "
+       "v⁺ − v_des = (v − v_des)/(1 + dt d/m)", "pipeline.sim.breve_controller.imex_step")
+def _imex() -> Outcome:
+    from pipeline.sim.breve_controller import imex_step
+
+    g, dt = rng(16), 0.03
+    M, D = _spd(g), np.diag(g.uniform(1, 10, 9))
+    rhs, v = g.standard_normal(9), g.standard_normal(9)
+    ref = sla.inv(M + dt * D) @ (M @ v + dt * (rhs + D @ v))
+    d1 = maxdiff(imex_step(M, D, rhs, v, dt, BIG)[0], ref)
+    m, dd, vdes = 2.0, 150.0, g.standard_normal(9)
+    v1, _ = imex_step(m * np.eye(9), dd * np.eye(9), -dd * (v - vdes), v, dt, BIG)
+    d2 = maxdiff(v1 - vdes, (v - vdes) / (1 + dt * dd / m))
+    return Outcome("random SPD M̆, diagonal D̆, RHS; scalar mode m = 2, d = 150, dt 0.03",
+                   max(d1, d2), 1e-12, f"matrix {fmt(d1)}, scalar {fmt(d2)}")
+
+
+@check("16", "sat(x, b) = x·min(1, b/‖x‖) per block, and its flags",
+       "pipeline.sim.limits.saturate")
+def _saturate() -> Outcome:
+    from pipeline.sim.limits import saturate, saturate_breve
+
+    g, lim, diffs = rng(17), check_spec().controller.limits, []
+    for scale in (0.01, 1.0, 100.0):
+        x = scale * g.standard_normal(9)
+        for kind in ("acc", "rate"):
+            out, flags = saturate_breve(x, lim, kind)
+            for j, name in enumerate(("omega_b", "nu_e_lin", "nu_e_ang")):
+                b, blk = getattr(lim, f"{name}_{kind}"), x[3 * j:3 * j + 3]
+                n = float(np.linalg.norm(blk))
+                diffs.append(maxdiff(out[3 * j:3 * j + 3], blk * min(1.0, b / n)))
+                if flags[f"sat_{name}_{kind}"] != (n > b):
+                    raise AssertionError(f"flag sat_{name}_{kind} wrong at scale {scale}")
+        y = scale * g.standard_normal(3)
+        diffs.append(maxdiff(saturate(y, 0.2)[0], y * min(1.0, 0.2 / np.linalg.norm(y))))
+    return Outcome("random 9-vectors at scales 0.01, 1, 100 with the spec's limits", max(diffs),
+                   1e-15)
+
+
+@check("17", "orbit reference p_c, ṗ_c, p̈_c vs r[cos φ, sin φ, 0] and its derivatives; "
+       "ω_b,des vs a finite difference of R_b,des", "pipeline.sim.base_guidance")
+def _guidance() -> Outcome:
+    import pinocchio as pin
+
+    from pipeline.sim.base_guidance import BaseGuidance
+
+    gcfg = check_spec().guidance
+    gd = BaseGuidance(gcfg, np.array([0.3, 0.1, 0.8]), np.array([1.0, 0.0, 0.0]))
+    Om, r, diffs = 2 * np.pi / gcfg.orbit_period, gcfg.orbit_radius, []
+    for tau in (0.0, 13.7, 250.0):
+        ref = gd.reference(tau)
+        phi = np.deg2rad(gcfg.orbit_phase_deg) + Om * tau
+        c, s = np.cos(phi), np.sin(phi)
+        diffs += [maxdiff(ref.p_c, r * np.array([c, s, 0])),
+                  maxdiff(ref.v_c, r * Om * np.array([-s, c, 0])),
+                  maxdiff(ref.a_c, -r * Om**2 * np.array([c, s, 0]))]
+        h = 1e-3
+        Rp, Rm = gd.reference(tau + h).R_b, gd.reference(tau - h).R_b
+        w = ref.R_b @ pin.log3(Rm.T @ Rp) / (2 * h)  # t frame
+        diffs.append(maxdiff(ref.w_b, w))
+    return Outcome(f"τ = 0, 13.7, 250 s; spec {check_spec().name} guidance; h = 1e-3 for ω_b,des",
+                   max(diffs), 1e-7)
+
+
+@check("18", "visible points (field of view, depth range, facing) vs a per-point loop",
+       "pipeline.sim.target")
+def _coverage() -> Outcome:
+    import pinocchio as pin
+
+    from pipeline.sim.target import build_target, visible
+
+    sp = check_spec()
+    tgt, cam, g = build_target(sp.target), sp.camera, rng(18)
+    mism, total = 0, 0
+    for _ in range(4):
+        p_e = g.uniform(-6, 6, 3)
+        R = pin.exp3(g.standard_normal(3))
+        got = visible(tgt, p_e, R, cam)
+        for j, (p, n) in enumerate(zip(tgt.points, tgt.normals, strict=True)):
+            x, y, d = R.T @ (p - p_e)
+            dist = float(np.linalg.norm(p - p_e))
+            seen = (np.hypot(x, y) <= d * np.tan(np.radians(cam.fov_deg / 2))
+                    and cam.d_min <= d <= cam.d_max
+                    and -(n @ (p - p_e)) / dist >= np.cos(np.radians(cam.max_angle_deg)))
+            mism += int(bool(seen) != bool(got[j]))
+            total += 1
+    return Outcome(f"{total} point tests: 4 random camera poses × {len(tgt.points)} target points",
+                   float(mism), 0.0, "number of points classified differently")

@@ -1,0 +1,272 @@
+"""``python -m pipeline claims``: run what is missing, evaluate every claim, write CLAIMS.md.
+
+Statuses: PASS (a ``hold`` claim holds), FAIL (a ``hold`` claim does not: exit 1), OPEN (an
+``open`` claim does not hold yet: listed with its measured value and reason, no failure) and
+NOW HOLDS (an ``open`` claim that holds: like a strict xfail, exit 1 until it is promoted to
+``expect: hold``). The comparator is a table of operators; nothing is evaluated as code.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.analysis.signals import lag1_autocorrelation
+from pipeline.errors import SpecError
+from pipeline.logs import atomic_write_text, read_columns
+from pipeline.reports.claims_file import (
+    LOG_GROUPS,
+    OPERATORS,
+    Claim,
+    ClaimCheck,
+    ClaimsFile,
+    load_claims,
+    needed_runs,
+    split_metric,
+)
+from pipeline.reports.runs import RunRecord, display_path, ensure_analysis, ensure_run
+from pipeline.reports.templating import render
+from pipeline.spec import PROJECT_ROOT, load_spec
+from pipeline.version import code_version
+
+
+@dataclass
+class CheckEval:
+    check: ClaimCheck
+    value: Any
+    threshold: Any
+    ok: bool
+
+    @property
+    def symbol(self) -> str:
+        return OPERATORS[self.check.op][1]
+
+
+@dataclass
+class ClaimEval:
+    claim: Claim
+    checks: list[CheckEval]
+    provenance: list[dict] = field(default_factory=list)
+
+    @property
+    def holds(self) -> bool:
+        return all(c.ok for c in self.checks)
+
+    @property
+    def status(self) -> str:
+        if self.claim.expect == "hold":
+            return "PASS" if self.holds else "FAIL"
+        return "NOW HOLDS" if self.holds else "OPEN"
+
+
+def log_statistic(path: Path, start: int, group: str, stat: str) -> float:
+    """A statistic of the logged reduced velocity v̆ over the analysis window.
+
+    ripple: the largest period-2 amplitude of a component, RMS(Δ²x)/4 (an alternating
+    a(−1)^k has Δ²x = 4a(−1)^k, a smooth signal almost none); step_rms: the largest RMS of
+    Δx; rms; lag1_min / lag1_max: the extreme lag-1 autocorrelations (eq. 25) of the components.
+    """
+    x = read_columns(path, ["v_breve"], start)["v_breve"][:, LOG_GROUPS[group]]
+    if stat == "ripple":
+        return float(np.max(np.sqrt(np.mean(np.diff(x, 2, axis=0) ** 2, axis=0)) / 4))
+    if stat == "step_rms":
+        return float(np.max(np.sqrt(np.mean(np.diff(x, axis=0) ** 2, axis=0))))
+    if stat == "rms":
+        return float(np.max(np.sqrt(np.mean(x**2, axis=0))))
+    r1 = lag1_autocorrelation(x)
+    return float(np.min(r1) if stat == "lag1_min" else np.max(r1))
+
+
+def dig(obj: Any, path: str, what: str) -> Any:
+    """Follow a dotted path through mappings and lists; a missing key is a SpecError."""
+    for part in path.split("."):
+        if isinstance(obj, dict) and part in obj:
+            obj = obj[part]
+        elif isinstance(obj, list) and part.lstrip("-").isdigit() and -len(obj) <= int(
+                part) < len(obj):
+            obj = obj[int(part)]
+        else:
+            raise SpecError(f"no key {part!r} in {what}")
+    return obj
+
+
+class Context:
+    """Resolves metrics, running and analysing what the claims need, once."""
+
+    def __init__(self, cf: ClaimsFile, out_dir: Path):
+        self.cf, self.out = cf, Path(out_dir)
+        logs = Path(cf.logs)
+        self.logs = logs if logs.is_absolute() else PROJECT_ROOT / logs
+        self.here = Path(cf.source).resolve().parent
+        self.runs: dict[str, RunRecord] = {}
+        self.analyses: dict[str, dict] = {}
+        self._cross: dict | None = None
+        self._baselines: dict | None = None
+        self._sweeps: dict[str, tuple[dict, dict]] = {}
+
+    def _spec(self, name: str):
+        ref = self.cf.runs[name].spec
+        if ref.endswith((".yaml", ".yml")) and not Path(ref).is_absolute():
+            ref = str(self.here / ref)
+        return load_spec(ref)
+
+    def prepare(self) -> None:
+        for name in needed_runs(self.cf):
+            self.runs[name] = ensure_run(self._spec(name), self.logs)
+        for name in needed_runs(self.cf):
+            dep = self.cf.runs[name].against
+            self.analyses[name] = ensure_analysis(
+                self.runs[name], self.out, self.runs.get(dep),
+                self.analyses.get(dep) if dep else None)
+
+    def cross_check(self) -> dict:
+        if self._cross is None:
+            from pipeline.reports.cross_check import write_cross_check
+
+            print("cross-checking equations against code", file=sys.stderr)
+            cc = write_cross_check(self.out)
+            self._cross = {**cc.summary(), "code_version": cc.code_version}
+        return self._cross
+
+    def baselines(self) -> dict:
+        if self._baselines is None:
+            from pipeline.reports.baselines import ensure_report
+
+            self._baselines = ensure_report(self.out)
+        return self._baselines
+
+    def sweep(self, alias: str) -> tuple[dict, dict]:
+        if alias not in self._sweeps:
+            from pipeline.reports.sweeps import ensure_sweep
+
+            ref = self.cf.sweeps[alias]
+            spec = ref.spec
+            if spec.endswith((".yaml", ".yml")) and not Path(spec).is_absolute():
+                spec = str(self.here / spec)
+            self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
+                                               self.out / "sweeps", ref.workers)
+        return self._sweeps[alias]
+
+    def value(self, metric: str) -> tuple[Any, dict]:
+        """The value of ``SOURCE:PATH`` and its provenance."""
+        source, path = split_metric(metric)
+        if source == "sweep":
+            alias, _, key = path.partition(".")
+            bracket, prov = self.sweep(alias)
+            return dig(bracket, key, f"the stability bracket of sweep {alias}"), prov
+        if source == "cross_check":
+            cc = self.cross_check()
+            prov = {"source": source, "code_version": cc["code_version"],
+                    "file": display_path(self.out / "GNC" / "cross_check.md")}
+            return dig(cc, path, "the cross-check summary"), prov
+        if source == "baselines":
+            b = self.baselines()
+            prov = {"source": source, "code_version": b["code_version"],
+                    "file": display_path(self.out / "baselines.json")}
+            return dig(b, path, "baselines.json"), prov
+        run, record = self.runs[source], self.analyses[source]
+        prov = {"source": source, "spec": run.spec.name, "spec_hash": run.meta.spec_hash,
+                "code_version": run.meta.code_version, "log": display_path(run.path)}
+        head, _, rest = path.partition(".")
+        if head == "spec":
+            return dig(run.spec.model_dump(mode="json"), rest, f"the spec of {source}"), prov
+        if head == "log":
+            group, stat = rest.split(".")
+            start = record["window"]["start_step"]
+            return log_statistic(run.path, start, group, stat), prov
+        return dig(record, path, f"the analysis.json of {source}"), prov
+
+
+def compare_values(op: str, value: Any, threshold: Any) -> bool:
+    fn = OPERATORS[op][0]
+    if op in ("eq", "ne"):
+        return bool(fn(value, threshold))
+    for x, what in ((value, "measured value"), (threshold, "threshold")):
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise SpecError(f"operator {op} needs numbers, the {what} is "
+                            f"{type(x).__name__} {x!r}"[:160])
+    if isinstance(value, float) and math.isnan(value):
+        return False
+    return bool(fn(value, threshold))
+
+
+def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
+    out = []
+    for claim in cf.claims:
+        evals, prov = [], []
+        for k, chk in enumerate(claim.checks, 1):
+            try:
+                value, p = ctx.value(chk.metric)
+                prov.append(p)
+                thr = chk.threshold
+                if chk.threshold_metric:
+                    thr, p2 = ctx.value(chk.threshold_metric)
+                    prov.append(p2)
+                ok = compare_values(chk.op, value, thr)
+            except SpecError as exc:
+                raise SpecError(f"{cf.source}: claim {claim.id}: check {k}: metric "
+                                f"{chk.metric}: {exc}") from None
+            evals.append(CheckEval(chk, value, thr, ok))
+        unique = [dict(t) for t in dict.fromkeys(tuple(sorted(p.items())) for p in prov)]
+        out.append(ClaimEval(claim, evals, unique))
+    return out
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
+
+
+def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path) -> Path:
+    ctx = {"results": results, "claims_file": display_path(cf.source),
+           "code_version": code_version(),
+           "counts": {s: sum(r.status == s for r in results)
+                      for s in ("PASS", "FAIL", "OPEN", "NOW HOLDS")}}
+    md = render("claims.md.j2", Path(out_dir) / "CLAIMS.md", **ctx)
+    render("claims.html.j2", Path(out_dir) / "CLAIMS.html", **ctx)
+    data = {"claims_file": ctx["claims_file"], "code_version": ctx["code_version"],
+            "claims": [{"id": r.claim.id, "statement": r.claim.statement,
+                        "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
+                        "checks": [{"metric": c.check.metric, "op": c.check.op,
+                                    "value": _jsonable(c.value),
+                                    "threshold": _jsonable(c.threshold), "ok": c.ok}
+                                   for c in r.checks],
+                        "provenance": r.provenance} for r in results]}
+    atomic_write_text(Path(out_dir) / "claims.json", json.dumps(data, indent=1, default=str))
+    return md
+
+
+def claims_command(claims: Path, out: Path) -> int:
+    """Evaluate the register; 0 if every hold claim holds and no open claim does."""
+    cf = load_claims(Path(claims))
+    ctx = Context(cf, out)
+    ctx.prepare()
+    results = evaluate(cf, ctx)
+    path = write_claims(results, cf, out)
+    for r in results:
+        detail = "; ".join(f"{c.check.metric} = {_short(c.value)} ({c.symbol} "
+                           f"{_short(c.threshold)})" for c in r.checks)
+        print(f"{r.claim.id:>4} {r.status:<9} {detail}")
+    failing = [r for r in results if r.status == "FAIL"]
+    promote = [r for r in results if r.status == "NOW HOLDS"]
+    for r in failing:
+        print(f"claim {r.claim.id} fails: {r.claim.statement}", file=sys.stderr)
+    for r in promote:
+        print(f"claim {r.claim.id} now holds: promote it to expect: hold ({r.claim.statement})",
+              file=sys.stderr)
+    print(f"-> {display_path(path)}")
+    return 1 if failing or promote else 0
+
+
+def _short(x: Any) -> str:
+    if isinstance(x, float):
+        return f"{x:.4g}"
+    s = json.dumps(x, default=str) if isinstance(x, (dict, list)) else str(x)
+    return s if len(s) <= 60 else s[:57] + "..."

@@ -1,0 +1,220 @@
+"""The claims register file (``specs/claims.yaml``): schema, ``extends`` and validation.
+
+    logs: logs                       # where runs are written (relative to the project root)
+    runs:                            # run names used in metric paths
+      nominal: {spec: nominal, against: dt010}
+      dt010:   {spec: omega_ripple_dt010}
+    claims:
+      - id: C1
+        statement: …
+        expect: hold                 # or open, with a reason
+        checks:                      # all must hold
+          - {metric: "nominal:dominant.lag1", op: lt, threshold: -0.5}
+
+A metric is ``SOURCE:PATH``. SOURCE is a run name (PATH a dotted path into its analysis.json,
+or ``spec.…`` into its resolved spec, or ``log.GROUP.STAT`` for a statistic of its logged
+reduced velocity), ``cross_check``, ``baselines`` or ``sweep`` (PATH: a name under ``sweeps:``
+then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``). A threshold is a
+literal or ``{metric: SOURCE:PATH}``. A file may ``extends:`` another (by path relative to
+itself): its ``runs`` and ``sweeps`` override the parent's by name, its ``claims`` are added
+after the parent's.
+"""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from pipeline.errors import SpecError
+from pipeline.spec import deep_merge
+
+
+def _abs(f: Callable[[float, float], bool]) -> Callable[[Any, Any], bool]:
+    return lambda a, b: f(abs(a), b)
+
+
+OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
+    "lt": (operator.lt, "<"), "le": (operator.le, "≤"), "gt": (operator.gt, ">"),
+    "ge": (operator.ge, "≥"), "eq": (operator.eq, "="), "ne": (operator.ne, "≠"),
+    "abs_lt": (_abs(operator.lt), "|·| <"), "abs_le": (_abs(operator.le), "|·| ≤"),
+    "abs_gt": (_abs(operator.gt), "|·| >"), "abs_ge": (_abs(operator.ge), "|·| ≥"),
+}
+NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
+FIXED_SOURCES = ("cross_check", "baselines", "sweep")
+LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
+              "camera_roll": slice(8, 9), "v_breve": slice(0, 9)}
+LOG_STATS = ("ripple", "step_rms", "lag1_min", "lag1_max", "rms")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ClaimCheck(_Strict):
+    metric: str
+    op: str
+    threshold: Any = None
+
+    @property
+    def threshold_metric(self) -> str | None:
+        t = self.threshold
+        return t["metric"] if isinstance(t, dict) and set(t) == {"metric"} else None
+
+
+class Claim(_Strict):
+    id: str = Field(min_length=1)
+    statement: str = Field(min_length=1)
+    expect: Literal["hold", "open"]
+    reason: str = ""
+    checks: list[ClaimCheck] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _open_needs_reason(self) -> Claim:
+        if self.expect == "open" and not self.reason.strip():
+            raise ValueError("an open claim needs a reason")
+        return self
+
+
+class RunRef(_Strict):
+    spec: str
+    against: str | None = None
+
+
+class SweepRef(_Strict):
+    """A sweep the claims use: ``python -m pipeline sweep SPEC --set … --name NAME``."""
+
+    spec: str
+    set: list[str] = Field(min_length=1)
+    name: str
+    workers: int = Field(default=2, gt=0)
+
+
+class ClaimsFile(_Strict):
+    logs: str = "logs"
+    runs: dict[str, RunRef] = Field(default_factory=dict)
+    sweeps: dict[str, SweepRef] = Field(default_factory=dict)
+    claims: list[Claim] = Field(min_length=1)
+    source: str = ""
+
+
+def split_metric(metric: str) -> tuple[str, str]:
+    source, sep, path = metric.partition(":")
+    if not sep or not source or not path:
+        raise ValueError(f"metric {metric!r} is not SOURCE:PATH")
+    return source, path
+
+
+def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
+    path = path.resolve()
+    if path in chain:
+        raise SpecError(f"{path}: cycle in extends")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise SpecError(f"{path}: claims file not found") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise SpecError(f"{path}: broken YAML{where}") from None
+    if not isinstance(data, dict):
+        raise SpecError(f"{path}: a claims file must be a mapping")
+    parent = data.pop("extends", None)
+    if parent is None:
+        return data
+    base = _read(path.parent / str(parent), (*chain, path))
+    merged = deep_merge(base, {k: v for k, v in data.items() if k != "claims"})
+    merged["claims"] = list(base.get("claims", [])) + list(data.get("claims", []))
+    return merged
+
+
+def _where(loc: tuple, data: dict) -> str:
+    """'claim C3: check 2: field op' from a pydantic error location."""
+    parts, node = [], data
+    for i, x in enumerate(loc):
+        if x == "claims" and i + 1 < len(loc) and isinstance(loc[i + 1], int):
+            try:
+                node = data["claims"][loc[i + 1]]
+                parts.append(f"claim {node.get('id', loc[i + 1])}")
+            except (IndexError, KeyError, TypeError, AttributeError):
+                parts.append(f"claim #{loc[i + 1] + 1}")
+        elif x == "checks" and i + 1 < len(loc) and isinstance(loc[i + 1], int):
+            parts.append(f"check {loc[i + 1] + 1}")
+        elif not isinstance(x, int) and (i == 0 or loc[i - 1] not in ("claims", "checks")):
+            parts.append(f"field {x}")
+    return ": ".join(parts) or "<root>"
+
+
+def load_claims(path: Path) -> ClaimsFile:
+    """Read, merge and validate a claims file; every error is one line naming what is wrong."""
+    path = Path(path)
+    data = _read(path)
+    try:
+        cf = ClaimsFile.model_validate({**data, "source": str(path)})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        msg = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
+        raise SpecError(f"{path}: {_where(err['loc'], data)}: {msg}") from None
+    validate(cf, path)
+    return cf
+
+
+def validate(cf: ClaimsFile, path: Path) -> None:
+    """Operators, sources, run names and log statistics, before anything runs."""
+    ids = [c.id for c in cf.claims]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise SpecError(f"{path}: duplicate claim id {dup[0]}")
+    for name, run in cf.runs.items():
+        if run.against is not None and run.against not in cf.runs:
+            raise SpecError(f"{path}: run {name}: against {run.against!r} is not a run name "
+                            f"(runs: {', '.join(cf.runs)})")
+    sources = ", ".join([*cf.runs, *FIXED_SOURCES])
+    for claim in cf.claims:
+        for k, chk in enumerate(claim.checks, 1):
+            where = f"{path}: claim {claim.id}: check {k}"
+            if chk.op not in OPERATORS:
+                raise SpecError(f"{where}: unknown operator {chk.op!r} "
+                                f"(one of {', '.join(OPERATORS)})")
+            for metric in filter(None, (chk.metric, chk.threshold_metric)):
+                try:
+                    source, mpath = split_metric(metric)
+                except ValueError as exc:
+                    raise SpecError(f"{where}: {exc}") from None
+                if source not in cf.runs and source not in FIXED_SOURCES:
+                    raise SpecError(f"{where}: unknown metric path {metric!r}: no source "
+                                    f"{source!r} (one of {sources})")
+                if source in cf.runs and mpath.startswith("log."):
+                    _check_log_path(metric, mpath, where)
+                if source == "sweep" and mpath.split(".")[0] not in cf.sweeps:
+                    raise SpecError(f"{where}: unknown metric path {metric!r}: no sweep "
+                                    f"{mpath.split('.')[0]!r} (sweeps: "
+                                    f"{', '.join(cf.sweeps) or 'none'})")
+
+
+def _check_log_path(metric: str, mpath: str, where: str) -> None:
+    parts = mpath.split(".")
+    if len(parts) != 3 or parts[1] not in LOG_GROUPS or parts[2] not in LOG_STATS:
+        raise SpecError(f"{where}: unknown metric path {metric!r}: log statistics are "
+                        f"log.GROUP.STAT with GROUP in {', '.join(LOG_GROUPS)} and STAT in "
+                        f"{', '.join(LOG_STATS)}")
+
+
+def needed_runs(cf: ClaimsFile) -> list[str]:
+    """Run names the claims use, with the runs they are compared against, dependencies first."""
+    used: list[str] = []
+    for claim in cf.claims:
+        for chk in claim.checks:
+            for metric in filter(None, (chk.metric, chk.threshold_metric)):
+                source = split_metric(metric)[0]
+                if source in cf.runs and source not in used:
+                    used.append(source)
+    for name in list(used):
+        dep = cf.runs[name].against
+        if dep is not None and dep not in used:
+            used.append(dep)
+    return sorted(used, key=lambda n: cf.runs[n].against is not None)

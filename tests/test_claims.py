@@ -1,0 +1,183 @@
+"""The claims register: declarative comparator, exit codes, reuse of runs, the real registers."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+from report_fixtures import built, run_cli
+
+from pipeline.errors import SpecError
+from pipeline.reports.claims import compare_values, dig
+from pipeline.reports.claims_file import OPERATORS, load_claims
+from pipeline.spec import SPECS_DIR
+
+
+def claims_file(tmp_path: Path, claims: list[dict], runs: dict | None = None) -> Path:
+    """A claims file on the shared 4-second test runs."""
+    b = built()
+    default_runs = {"nominal": {"spec": str(b.spec_file("t_nominal")), "against": "dt010"},
+                    "dt010": {"spec": str(b.spec_file("t_dt010"))}}
+    path = tmp_path / "claims.yaml"
+    path.write_text(yaml.safe_dump({"logs": str(b.logs), "runs": runs or default_runs,
+                                    "claims": claims}, allow_unicode=True))
+    return path
+
+
+def claim(cid: str, metric: str, op: str, threshold, expect: str = "hold", **kw) -> dict:
+    return {"id": cid, "statement": f"statement of {cid}", "expect": expect,
+            "checks": [{"metric": metric, "op": op, "threshold": threshold}], **kw}
+
+
+def test_a_threshold_the_data_cannot_meet_fails_and_names_the_claim(tmp_path):
+    path = claims_file(tmp_path, [
+        claim("K1", "nominal:dominant.lag1", "lt", -0.5),
+        claim("K2", "nominal:dominant.lag1", "lt", -2.0),  # r₁ is never below −1
+    ])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 1, r.stderr
+    assert "claim K2 fails" in r.stderr and "claim K1" not in r.stderr
+    md = (tmp_path / "out" / "CLAIMS.md").read_text()
+    assert re.search(r"\| K1 \|.*\*\*PASS\*\*", md) and re.search(r"\| K2 \|.*\*\*FAIL\*\*", md)
+    assert "running" not in r.stderr  # the finished test runs were reused
+
+
+@pytest.mark.parametrize("check,needle", [
+    ({"metric": "nominal:dominant.lag1", "op": "below", "threshold": 0},
+     "unknown operator 'below'"),
+    ({"metric": "nowhere:dominant.lag1", "op": "lt", "threshold": 0},
+     "unknown metric path 'nowhere:dominant.lag1'"),
+    ({"metric": "__import__('os').system('true')", "op": "lt", "threshold": 0},
+     "is not SOURCE:PATH"),
+    ({"metric": "nominal:log.omega_b.wobble", "op": "lt", "threshold": 0},
+     "unknown metric path 'nominal:log.omega_b.wobble'"),
+    ({"metric": "nominal:dominant.lag1", "op": "lt", "threshold": 0, "extra": 1},
+     "unknown key"),
+    ({"metric": "sweep:nope.holds", "op": "eq", "threshold": True},
+     "unknown metric path 'sweep:nope.holds'"),
+])
+def test_bad_claims_files_are_one_line_errors_before_any_run(tmp_path, check, needle):
+    path = claims_file(tmp_path, [{"id": "B1", "statement": "s", "expect": "hold",
+                                   "checks": [check]}])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 2
+    assert needle in r.stderr and "B1" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unknown_key_in_analysis_json_is_a_one_line_error(tmp_path):
+    path = claims_file(tmp_path, [claim("B2", "nominal:dominant.lagg1", "lt", 0)])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 2
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("error:") and "B2" in last and "'lagg1'" in last
+    assert "Traceback" not in r.stderr
+
+
+def test_open_claims_are_listed_and_a_holding_one_asks_for_promotion(tmp_path):
+    path = claims_file(tmp_path, [
+        claim("O1", "nominal:dominant.lag1", "gt", 0.9, expect="open", reason="period-2 here"),
+    ])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    md = (tmp_path / "out" / "CLAIMS.md").read_text()
+    assert "**OPEN**" in md and "period-2 here" in md
+
+    path = claims_file(tmp_path, [
+        claim("O2", "nominal:dominant.lag1", "lt", -0.5, expect="open", reason="thought not"),
+    ])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 1
+    assert "claim O2 now holds: promote" in r.stderr
+    data = json.loads((tmp_path / "out" / "claims.json").read_text())
+    assert data["claims"][0]["status"] == "NOW HOLDS"
+
+
+def test_open_claim_without_a_reason_is_rejected(tmp_path):
+    path = claims_file(tmp_path, [claim("O3", "nominal:dominant.lag1", "lt", 0, expect="open")])
+    with pytest.raises(SpecError, match=r"O3.*needs a reason"):
+        load_claims(path)
+
+
+def test_provenance_and_threshold_references(tmp_path):
+    b = built()
+    path = claims_file(tmp_path, [
+        {"id": "P1", "statement": "same dt", "expect": "hold", "checks": [
+            {"metric": "nominal:spec.mission.dt", "op": "eq",
+             "threshold": {"metric": "nominal:spec.mission.dt"}},
+            {"metric": "nominal:log.camera_roll.ripple", "op": "gt", "threshold": 0.01},
+            {"metric": "nominal:log.omega_b.ripple", "op": "lt", "threshold": 1e-3}]},
+    ])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    prov = json.loads((tmp_path / "out" / "claims.json").read_text())["claims"][0]["provenance"]
+    assert prov == [{"code_version": prov[0]["code_version"], "log": str(
+        b.logs / "t_nominal" / "run.parquet"), "source": "nominal", "spec": "t_nominal",
+        "spec_hash": prov[0]["spec_hash"]}]
+    assert len(prov[0]["spec_hash"]) == 64
+
+
+@pytest.mark.parametrize("op,value,threshold,expected", [
+    ("lt", -0.99, -0.5, True), ("lt", -0.5, -0.5, False), ("le", -0.5, -0.5, True),
+    ("gt", 2.9, 2, True), ("ge", 2, 2, True), ("eq", 0, 0.0, True), ("ne", 1, 0, True),
+    ("abs_lt", -1e-13, 1e-12, True), ("abs_le", -2e-12, 1e-12, False),
+    ("abs_gt", -3, 2, True), ("abs_ge", 2, 2, True), ("lt", float("nan"), 1, False),
+    ("eq", {"K": 2.0}, {"K": 2.0}, True), ("eq", "imex", "explicit", False),
+])
+def test_comparator(op, value, threshold, expected):
+    assert compare_values(op, value, threshold) is expected
+
+
+def test_comparator_refuses_non_numbers_for_order_operators():
+    with pytest.raises(SpecError, match="operator lt needs numbers"):
+        compare_values("lt", {"K": 2.0}, 1)
+    with pytest.raises(SpecError, match="no key 'x'"):
+        dig({"a": [1, 2]}, "a.x", "t")
+    assert dig({"a": [1, {"b": 3}]}, "a.1.b", "t") == 3
+
+
+# The thresholds of issue 5, never moved: (claim, metric, op, threshold).
+ISSUE_THRESHOLDS = [
+    ("C1", "nominal:dominant.lag1", "lt", -0.5),
+    ("C2", "dt010:dominant.lag1", "gt", 0.9),
+    ("C3", "nominal:theory.dt_mu_max", "gt", 2),
+    ("C3", "dt010:theory.dt_mu_max", "lt", 2),
+    ("C4", "nominal:theory.eig_dominant.real", "lt", -1),
+    ("C4", "dt010:theory.spectral_radius", "lt", 1),
+    ("C5", "nominal:alignment.abs_cos", "ge", 0.9),
+    ("C6", "nominal:comparison.amplitude_ratio", "ge", 10),
+    ("C7", "nominal:provenance.max_abs_s_min_G", "le", 1e-12),
+    ("C8", "baselines:max_abs_diff", "eq", 0),
+    ("C9", "imex:dominant.lag1", "gt", 0.9),
+    ("C10", "nominal:metrics.pointing_err_deg_max", "lt", 1),
+    ("C10", "nominal:comparison.coverage_diff_pp", "le", 2),
+    ("C11", "cross_check:failures", "eq", 0),
+]
+
+
+@pytest.mark.parametrize("name", ["claims.yaml", "claims_ci.yaml"])
+def test_the_registers_state_the_issue_claims_with_their_thresholds(name):
+    cf = load_claims(SPECS_DIR / name)
+    by_id = {c.id: c for c in cf.claims}
+    for cid, metric, op, threshold in ISSUE_THRESHOLDS:
+        assert by_id[cid].expect == "hold"
+        assert any(k.metric == metric and k.op == op and k.threshold == threshold
+                   for k in by_id[cid].checks), (cid, metric)
+    assert {c.id for c in cf.claims} >= {f"C{i}" for i in range(1, 12)}
+    assert all(k.op in OPERATORS for c in cf.claims for k in c.checks)
+
+
+def test_ci_register_is_the_same_claims_on_short_missions():
+    full, ci = load_claims(SPECS_DIR / "claims.yaml"), load_claims(SPECS_DIR / "claims_ci.yaml")
+    assert full.claims == ci.claims
+    assert {n: r.spec for n, r in ci.runs.items()} == {
+        "nominal": "short_nominal", "dt010": "short_omega_ripple_dt010",
+        "imex": "short_omega_ripple_imex"}
+    assert {n: r.against for n, r in ci.runs.items()} == {n: r.against
+                                                        for n, r in full.runs.items()}
+    assert ci.sweeps["dt"].spec == "short_nominal" and full.sweeps["dt"].spec == "nominal"
+    assert ci.sweeps["dt"].set[0] == full.sweeps["dt"].set[0]  # the same dt grid
