@@ -59,6 +59,23 @@ def poses(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude, aim_period, o_
     return R_b, p_e, R_e, aim
 
 
+@jit
+def references(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude, aim_period, o_ce_b,
+               x_e_b, h):
+    """All references at τ (eq. 17): the poses at τ and, by central differences of the
+    orbit-based poses at τ ± h, the camera velocity and the attitude rates ω = vee(Ṙ Rᵀ)."""
+    p_c, v_c, a_c = orbit(tau, phase, radius, omega)
+    R_b, p_e, R_e, aim = poses(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude,
+                               aim_period, o_ce_b, x_e_b)
+    R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, False, phase, radius, omega, aim_amplitude,
+                                aim_period, o_ce_b, x_e_b)
+    R_bm, p_em, R_em, _ = poses(tau - h, p_b, False, phase, radius, omega, aim_amplitude,
+                                aim_period, o_ce_b, x_e_b)
+    w_b = vee((R_bp - R_bm) / (2 * h) @ np.ascontiguousarray(R_b.T))
+    w_e = vee((R_ep - R_em) / (2 * h) @ np.ascontiguousarray(R_e.T))
+    return p_c, v_c, a_c, R_b, w_b, p_e, (p_ep - p_em) / (2 * h), R_e, w_e, aim
+
+
 class BaseGuidance:
     """References for an inspection orbit about a target at the t-frame origin."""
 
@@ -68,27 +85,15 @@ class BaseGuidance:
         self.x_e_b = np.ascontiguousarray(x_e_b, dtype=float)  # camera x-axis at start, bus frame
         self.omega = 2 * np.pi / cfg.orbit_period
         self.phase = float(np.deg2rad(cfg.orbit_phase_deg))
-
-    def _poses(self, tau: float, p_b: np.ndarray | None = None):
-        c = self.cfg
-        return poses(tau, np.zeros(3) if p_b is None else np.ascontiguousarray(p_b),
-                     p_b is not None, self.phase, c.orbit_radius, self.omega, c.aim_amplitude,
-                     c.aim_period, self.o_ce_b, self.x_e_b)
+        self._zero3 = np.zeros(3)
 
     def reference(self, tau: float, p_b: np.ndarray | None = None) -> Reference:
         """References at τ. With the bus position ``p_b`` the desired bus z-axis points from
         the actual bus at the target (so orbit-tracking error does not become pointing error);
-        without it, from the desired CoM. Rates are those of the orbit-based references,
-        the attitude rates by central differences: ω = vee(Ṙ Rᵀ).
+        without it, from the desired CoM. Rates are those of the orbit-based references.
         """
-        p_c, v_c, a_c = orbit(tau, self.phase, self.cfg.orbit_radius, self.omega)
-        R_b, p_e, R_e, aim = self._poses(tau, p_b)
-        R_bp, p_ep, R_ep, _ = self._poses(tau + _H)
-        R_bm, p_em, R_em, _ = self._poses(tau - _H)
-        return Reference(
-            p_c=p_c, v_c=v_c, a_c=a_c,
-            R_b=R_b, w_b=vee((R_bp - R_bm) / (2 * _H) @ R_b.T),
-            p_e=p_e, v_e=(p_ep - p_em) / (2 * _H),
-            R_e=R_e, w_e=vee((R_ep - R_em) / (2 * _H) @ R_e.T),
-            aim=aim,
-        )
+        c = self.cfg
+        return Reference(*references(
+            tau, self._zero3 if p_b is None else p_b, p_b is not None, self.phase,
+            c.orbit_radius, self.omega, c.aim_amplitude, c.aim_period, self.o_ce_b, self.x_e_b,
+            _H))

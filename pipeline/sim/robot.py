@@ -145,18 +145,20 @@ class GiordanoRobot:
         # Copies: Pinocchio's arrays view its data, which the next call overwrites.
         R_tb, p_b = oMb.rotation.copy(), oMb.translation.copy()
         R_te, p_e = oMe.rotation.copy(), oMe.translation.copy()
-        (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
-         gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping)
-        s_min_G, kappa_G = sigma_min_and_cond(gamma)
         if dynamics:
-            pin.computeCentroidalMapTimeVariation(model, data, q, v)
             dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
             C = pin.computeCoriolisMatrix(model, data, q, v)
-            gamma_dot, M_hat, C_hat = tt.dynamics_transform(
-                R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, data.Ag, data.dAg, m, M, C,
-                gamma_inv)
+            pin.computeCentroidalMapTimeVariation(model, data, q, v)
+            (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
+             gamma_dot, M_hat, C_hat) = tt.full_transform(
+                R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping, v, dJ_e, data.Ag,
+                data.dAg, C)
         else:
+            (p_bc, p_c, _, _, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
+             gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,
+                                            self.damping)
             gamma_dot = C = M_hat = C_hat = self._zero_12
+        s_min_G, kappa_G = sigma_min_and_cond(gamma)
         return Terms(R_tb, p_b, p_c, p_e, R_te, p_bc, J_bar_v, J_oplus, J_inv, G_wb, gamma,
                      gamma_inv, gamma_dot, M, C, M_hat, C_hat, float(s_min_J), float(kappa_J),
                      float(s_min_G), float(kappa_G))

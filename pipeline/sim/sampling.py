@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd
 
 from pipeline.spec import ConfigSampling, Ramp
 
@@ -25,8 +26,14 @@ def sigma_min(A: np.ndarray) -> float | None:
 
 
 def sigma_min_and_cond(A: np.ndarray) -> tuple[float, float]:
-    """(σ_min, κ = σ_max/σ_min) from one SVD pass (eq. 19); κ = inf when σ_min = 0."""
-    s = np.linalg.svd(np.asarray(A, dtype=float), compute_uv=False)
+    """(σ_min, κ = σ_max/σ_min) from one SVD pass (eq. 19); κ = inf when σ_min = 0.
+
+    LAPACK's dgesdd without singular vectors, called directly: the simulator reads Γ's
+    conditioning every step, and NumPy's wrapper costs more than the decomposition.
+    """
+    _, s, _, info = dgesdd(np.asarray(A, dtype=float), compute_uv=0)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"SVD did not converge (dgesdd info {info})")
     smin = float(s[-1])
     return smin, (float(s[0] / smin) if smin > 0 else float("inf"))
 

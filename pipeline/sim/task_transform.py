@@ -145,10 +145,12 @@ def task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping):
 
 
 @jit
-def dynamics_transform(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg, mass, M, C,
-                       gamma_inv):
-    """Eqs. 7–9 in one call: Γ̇, M̂ and Ĉ."""
-    gamma_dot = gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag,
-                                      dAg, mass)
+def full_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping, v, dJ_e, Ag, dAg, C):
+    """Eqs. 2–9 in one call: :func:`task_transform`, then Γ̇, M̂ and Ĉ."""
+    (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
+     gamma_inv) = task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping)
+    gamma_dot = gamma_time_derivative(np.ascontiguousarray(R_tb), R_te, R_eb, p_bc, p_ec,
+                                      J_bar_v, J_e, v, dJ_e, Ag, dAg, mass)
     M_hat, C_hat = transformed_dynamics(M, C, gamma_inv, gamma_dot)
-    return gamma_dot, M_hat, C_hat
+    return (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
+            gamma_dot, M_hat, C_hat)
