@@ -1,0 +1,181 @@
+"""One sweep point as one Dask task: run the mission unless cached, analyse it, return a record.
+
+Runs on a worker. The log goes to ``ROOT/<point>/run.parquet`` and the analysis beside it
+(``analysis.json``, ``directions.parquet``), all written atomically.
+
+Cache: a log whose metadata carries the point's spec hash and the current code version is
+reused, whether ``complete`` or ``failed`` (the simulation is deterministic: the same spec on
+the same code diverges again at the same step). An ``analysis.json`` is reused when it is not
+older than the log and names the same spec hash and code version.
+
+Concurrency: the simulate-and-analyse part runs under an exclusive ``flock`` on
+``ROOT/<point>/.lock``, so two sweeps sharing a point (or a rescheduled task meeting its
+predecessor) never simulate it twice at once; the second waits, then finds the cache. The
+kernel drops the lock of a killed process, so a stale lock cannot block. Holding the lock, a
+task removes the temporary files a killed writer of this point left behind.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import math
+import os
+import socket
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+from pathlib import Path
+
+from pipeline.errors import LogError, PipelineError
+from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.spec import Spec
+from pipeline.version import code_version
+
+LOCK_NAME = ".lock"
+LOG_NAME = "run.parquet"
+ANALYSIS_NAME = "analysis.json"
+
+# record column → path in analysis.json
+FIGURES: dict[str, tuple[str, ...]] = {
+    "dominant_lag1": ("dominant", "lag1"),
+    "dominant_sigma": ("dominant", "sigma"),
+    "dt_mu_max": ("theory", "dt_mu_max"),
+    "mu_max": ("theory", "mu_max"),
+    "dt_star": ("theory", "dt_star"),
+    "eig_real": ("theory", "eig_dominant", "real"),
+    "eig_imag": ("theory", "eig_dominant", "imag"),
+    "spectral_radius": ("theory", "spectral_radius"),
+    "abs_cos": ("alignment", "abs_cos"),
+    "velocity_jump_median": ("velocity_jump", "median"),
+    "pointing_err_deg_max": ("metrics", "pointing_err_deg_max"),
+    "coverage_final": ("metrics", "coverage_final"),
+}
+
+
+def cached_log(log: Path, spec: Spec) -> LogMeta | None:
+    """The log's metadata if it is a finished run of this spec on this code, else None."""
+    try:
+        meta = read_meta(log)
+    except LogError:
+        return None
+    if (meta.spec_hash != spec.spec_hash or meta.code_version != code_version()
+            or meta.status not in ("complete", "failed")):
+        return None
+    return meta
+
+
+def cached_analysis(path: Path, log: Path, meta: LogMeta) -> dict | None:
+    """The analysis record beside the log if it is at least as new and of the same run."""
+    try:
+        if path.stat().st_mtime_ns < log.stat().st_mtime_ns:
+            return None
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if record.get("spec_hash") != meta.spec_hash or record.get("code_version") != meta.code_version:
+        return None
+    return record
+
+
+@contextmanager
+def point_lock(folder: Path) -> Iterator[None]:
+    """Exclusive lock on ``folder/.lock`` (``flock``; released by the kernel if we die).
+
+    The lock file is removed on release; a waiter that then holds a lock on the removed file
+    notices (inode changed) and locks the new one. On a file system without ``flock`` the
+    point runs unlocked (the atomic rename still rules out a torn log).
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / LOCK_NAME
+    while True:
+        fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.ENOLCK, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL):
+                yield
+                return
+            raise
+        try:
+            st = os.stat(path)
+            held = (st.st_ino, st.st_dev) == (os.fstat(fd).st_ino, os.fstat(fd).st_dev)
+        except FileNotFoundError:
+            held = False
+        if held:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+        yield
+    finally:
+        with suppress(FileNotFoundError):
+            os.unlink(path)
+        os.close(fd)
+
+
+def remove_stale_temps(folder: Path) -> list[str]:
+    """Delete the ``.*.tmp`` files of a dead writer (call only while holding the lock)."""
+    gone = []
+    for p in folder.glob(".*.tmp"):
+        with suppress(FileNotFoundError):
+            p.unlink()
+            gone.append(p.name)
+    return gone
+
+
+def figures(analysis: dict | None) -> dict[str, float]:
+    out = {}
+    for col, path in FIGURES.items():
+        node = analysis
+        for p in path:
+            node = node.get(p) if isinstance(node, dict) else None
+        out[col] = float(node) if isinstance(node, int | float) else math.nan
+    return out
+
+
+def run_point(spec: Spec, root: str) -> dict:
+    """The Dask task of one point (see the module docstring); returns a small record."""
+    from pipeline.analysis.cli import write_analysis
+    from pipeline.analysis.stages import analyze_log
+    from pipeline.sim.run import run_spec
+
+    t0 = time.perf_counter()
+    folder = Path(root) / spec.name
+    log, analysis_path = folder / LOG_NAME, folder / ANALYSIS_NAME
+    ran = analysed = False
+    error = ""
+    analysis = None
+    meta = cached_log(log, spec)
+    if meta is not None and meta.status == "complete":
+        analysis = cached_analysis(analysis_path, log, meta)
+    if meta is None or (meta.status == "complete" and analysis is None):
+        with point_lock(folder):
+            remove_stale_temps(folder)
+            meta = cached_log(log, spec)  # another sweep may have finished it meanwhile
+            if meta is None:
+                run_spec(spec, root, raise_on_failure=False)
+                ran = True
+                meta = read_meta(log)
+            if meta.status == "complete":
+                analysis = cached_analysis(analysis_path, log, meta)
+                if analysis is None:
+                    try:
+                        analysis = analyze_log(log)
+                    except PipelineError as exc:
+                        error = f"analysis: {exc}"
+                    else:
+                        write_analysis(analysis, Path(root))
+                        analysed = True
+    status = meta.status if not error else "failed"
+    if meta.status != "complete":
+        error = meta.error or f"log marked {meta.status}"
+    return {
+        "point": spec.name, "status": status, "error": error, "ran": ran, "analysed": analysed,
+        "n_steps": num_rows(log), "seconds": time.perf_counter() - t0,
+        "worker": f"{socket.gethostname()}:{os.getpid()}", "spec_hash": spec.spec_hash,
+        "log": str(log), **figures(analysis),
+    }

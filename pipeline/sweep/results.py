@@ -1,0 +1,120 @@
+"""The sweep table (``sweep.parquet``), its printed summary, and the stability bracket (C12)."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.errors import LogError
+from pipeline.logs import atomic_write_bytes
+from pipeline.sweep.grid import format_value
+from pipeline.sweep.point import FIGURES
+
+TABLE_NAME = "sweep.parquet"
+LEAD = ["point"]
+TAIL = ["status", "error", "ran", "analysed", *FIGURES, "n_steps", "seconds", "worker",
+        "spec_hash", "log"]
+
+
+def _cell(v: Any) -> Any:
+    return v if isinstance(v, bool | int | float | str) else json.dumps(v, sort_keys=True)
+
+
+def make_table(keys: list[str], overrides: list[dict], records: list[dict]) -> pd.DataFrame:
+    """One row per point, in grid order: point, the override columns, status, error, figures."""
+    rows = [{"point": r["point"], **{k: _cell(o[k]) for k in keys},
+             **{c: r.get(c) for c in TAIL}} for o, r in zip(overrides, records, strict=True)]
+    df = pd.DataFrame(rows, columns=[*LEAD, *keys, *TAIL])
+    for c in FIGURES:
+        df[c] = df[c].astype(float)
+    return df
+
+
+def write_sweep_table(df: pd.DataFrame, path: Path, metadata: dict[str, str]) -> Path:
+    """Write ``df`` to Parquet atomically, with ``pipeline.*`` schema metadata."""
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    md = {**(table.schema.metadata or {}), **{k.encode(): v.encode() for k, v in metadata.items()}}
+    buf = io.BytesIO()
+    pq.write_table(table.replace_schema_metadata(md), buf, compression="zstd")
+    atomic_write_bytes(path, buf.getvalue())
+    return path
+
+
+def read_sweep_table(path: Path | str) -> pd.DataFrame:
+    """A ``sweep.parquet`` as a DataFrame (LogError naming the file if it is not one)."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: sweep table not found (run `make sweep`)")
+    try:
+        return pq.read_table(path).to_pandas()
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise LogError(f"{path}: not a readable sweep table ({str(exc).splitlines()[0]})") from None
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "—" if math.isnan(v) else f"{v:.4g}"
+    return str(v)
+
+
+def summary_text(df: pd.DataFrame, keys: list[str], path: Path) -> str:
+    """A fixed-width table of the points and a closing line with the counts."""
+    cols = [*keys, "status", "ran", "dominant_lag1", "dt_mu_max", "eig_real", "spectral_radius"]
+    heads = [*keys, "status", "ran", "lag-1", "dt·μ_max", "eig real", "ρ"]
+    cached = (~df["ran"].astype(bool)) & (df["log"] != "")  # rows without a log never ran
+    df = df.assign(ran=np.where(df["ran"], "run", np.where(cached, "cached", "—")))
+    shown = dict.fromkeys(keys, format_value)
+    cells = [[shown.get(c, _fmt)(row[c]) for c in cols] for _, row in df.iterrows()]
+    widths = [max(len(h), *(len(r[i]) for r in cells)) for i, h in enumerate(heads)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(heads, widths, strict=True))]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    n_fail = int((df["status"] != "complete").sum())
+    lines.append(f"{len(df)} points: {len(df) - n_fail} complete, {n_fail} failed; "
+                 f"{int((df['ran'] == 'run').sum())} simulated now, {int(cached.sum())} from "
+                 f"cache -> {path}")
+    for _, row in df[df["status"] != "complete"].iterrows():
+        lines.append(f"  failed {row['point']}: {row['error']}")
+    return "\n".join(lines)
+
+
+def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "mission.dt") -> dict:
+    """Where the measured dominant lag-1 changes sign along ``key``, against dt* = 2/μ_max.
+
+    Uses the complete rows sorted by ``key``. ``measured`` is the interval between the two
+    grid points where the lag-1 changes sign (None unless it changes sign exactly once);
+    ``predicted`` is the interval between the grid points that bracket the predicted dt*
+    (the median over the points; its spread is ``dt_star_range``). ``holds`` is true when
+    the sign changes exactly once and every point's predicted dt* lies in the measured
+    interval (``lo < dt* <= hi``).
+    """
+    df = (sweep_table if isinstance(sweep_table, pd.DataFrame)
+          else read_sweep_table(sweep_table))
+    if key not in df.columns:
+        raise LogError(f"sweep table has no column {key!r} (columns: {', '.join(df.columns)})")
+    ok = df[(df["status"] == "complete") & df["dominant_lag1"].notna()].sort_values(key)
+    x = ok[key].to_numpy(float)
+    lag = ok["dominant_lag1"].to_numpy(float)
+    stars = ok["dt_star"].dropna().to_numpy(float)
+    flips = [(float(x[i]), float(x[i + 1])) for i in range(len(x) - 1)
+             if np.sign(lag[i]) != np.sign(lag[i + 1])]
+    dt_star = float(np.median(stars)) if stars.size else math.nan
+    below, above = x[x <= dt_star], x[x > dt_star]
+    predicted = (float(below.max()) if below.size else None,
+                 float(above.min()) if above.size else None)
+    measured = flips[0] if len(flips) == 1 else None
+    holds = bool(measured is not None and stars.size
+                 and all(measured[0] < s <= measured[1] for s in stars))
+    return {
+        "key": key, "n_points": len(df), "n_complete": len(ok), "grid": x.tolist(),
+        "lag1": lag.tolist(), "flips": flips, "measured": measured, "dt_star": dt_star,
+        "dt_star_range": (float(stars.min()), float(stars.max())) if stars.size else None,
+        "predicted": predicted, "holds": holds,
+    }
