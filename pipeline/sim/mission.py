@@ -26,7 +26,7 @@ from pipeline.sim.jit import jit
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import attitude_error, quat_from_matrix
-from pipeline.sim.target import build_target, visible
+from pipeline.sim.target import build_target, mark_seen
 from pipeline.spec import Spec
 
 
@@ -142,10 +142,11 @@ def loop_update(R_tb, R_te, p_e, p_c, M_hat, C_hat, gamma_inv,
     return (v_new, v_c_new, v_b_new, integral_new, x_tilde, v_des, mu_max, hits, com_pos_err)
 
 
+@jit
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle between two vectors in degrees (eq. 18's pointing and boresight errors)."""
-    c = float(a @ b) / math.sqrt(float(a @ a) * float(b @ b))
-    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+    c = (a @ b) / np.sqrt((a @ a) * (b @ b))
+    return np.degrees(np.arccos(max(-1.0, min(1.0, c))))
 
 
 class Mission:
@@ -202,8 +203,8 @@ class Mission:
             "v_breve_des": v_des, "x_tilde": x_tilde,
             "s_min_G": T.s_min_G, "kappa_G": T.kappa_G, "s_min_J": T.s_min_J,
             "kappa_J": T.kappa_J, "gamma": gamma, "dt_mu_max": dt * mu_max,
-            "pointing_err_deg": angle_deg(T.R_tb[:, 2], -T.p_b),
-            "boresight_err_deg": angle_deg(T.R_te[:, 2], ref.aim - T.p_e),
+            "pointing_err_deg": angle_deg(T.R_tb[:, 2].copy(), -T.p_b),
+            "boresight_err_deg": angle_deg(T.R_te[:, 2].copy(), ref.aim - T.p_e),
             "com_err": math.sqrt(float(com_pos_err @ com_pos_err)),
             "_p_e": T.p_e, "_R_te": T.R_te, **dict(zip(LIMIT_FLAGS, hits, strict=True)),
         }
@@ -221,6 +222,7 @@ class Mission:
         cols["step"] = np.arange(n, dtype=np.int64)
         cols["t"] = np.arange(n) * self.dt
         seen = np.zeros(len(self.target.points), dtype=bool)
+        n_seen, cam = 0, self.spec.camera
         s = self.initial_state()
         warned: list[str] = []
         # Overflow shows as a non-finite state, caught below at the step it happens.
@@ -229,8 +231,7 @@ class Mission:
             for k in range(n):
                 try:
                     s_next, row = self.step(s)
-                    finite = all(np.all(np.isfinite(x)) for x in
-                                 (s_next.q, s_next.v, s_next.v_breve, s_next.v_c))
+                    finite = state_is_finite(s_next.q, s_next.v, s_next.v_breve, s_next.v_c)
                 except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                     finite, why = False, f"{type(exc).__name__}: {exc}"
                 else:
@@ -238,9 +239,9 @@ class Mission:
                 if not finite:
                     cut = {c: a[:k] for c, a in cols.items()}
                     return MissionResult(cut, "failed", k, f"step {k}: {why}", warned)
-                seen |= visible(  # coverage (eq. 18): the union of what was seen so far
-                    self.target, row.pop("_p_e"), row.pop("_R_te"), self.spec.camera)
-                row["coverage"] = float(seen.mean())
+                # coverage (eq. 18): the share of points seen so far
+                n_seen += mark_seen(self.target, row.pop("_p_e"), row.pop("_R_te"), cam, seen)
+                row["coverage"] = n_seen / seen.size
                 for c, val in row.items():
                     cols[c][k] = val
                 if (not warned and self.spec.controller.integrator == "explicit"
@@ -249,6 +250,16 @@ class Mission:
                 s = s_next
                 bar.update()
         return MissionResult(cols, "complete", warnings=warned)
+
+
+@jit
+def state_is_finite(q, v, v_breve, v_c) -> bool:
+    """True when every entry of the carried state is finite."""
+    for a in (q, v, v_breve, v_c):
+        for x in a:
+            if not np.isfinite(x):
+                return False
+    return True
 
 
 def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:

@@ -59,6 +59,26 @@ def visible(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Came
                         cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)))
 
 
+def mark_seen(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Camera,
+              seen: np.ndarray) -> int:
+    """Mark the points visible now in ``seen`` (in place); the number newly seen (eq. 18)."""
+    return mark_visible(target.points, target.normals, np.ascontiguousarray(p_e),
+                        np.ascontiguousarray(R_te), np.tan(np.deg2rad(cam.fov_deg) / 2),
+                        cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)), seen)
+
+
+@jit
+def mark_visible(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max, seen):
+    """``seen |= visible_mask(...)`` without the temporary; returns how many were new."""
+    new = 0
+    vis = visible_mask(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max)
+    for i in range(vis.size):
+        if vis[i] and not seen[i]:
+            seen[i] = True
+            new += 1
+    return new
+
+
 @jit
 def visible_mask(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max):
     """Per point: with r = p − p_e and (x, y, z) = R_teᵀ r, seen iff d_min <= z <= d_max,
