@@ -151,6 +151,11 @@ def _to_numpy(col: pa.ChunkedArray | pa.Array, width: int | None) -> np.ndarray:
     return col.flatten().to_numpy(zero_copy_only=False).reshape(-1, width)
 
 
+def require_columns(path: Path, columns: list[str]) -> None:
+    """A LogError naming the first of ``columns`` the log lacks."""
+    _check_columns(path, _open(path), columns)
+
+
 def _check_columns(path: Path, pf: pq.ParquetFile, columns: list[str]) -> None:
     names = set(pf.schema_arrow.names)
     for c in columns:

@@ -14,7 +14,7 @@ import numpy as np
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.errors import CheckFailed, LogError
-from pipeline.logs import iter_columns, num_rows, read_columns, read_meta
+from pipeline.logs import iter_columns, num_rows, read_columns, read_meta, require_columns
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.robot import GiordanoRobot
@@ -57,6 +57,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         raise LogError(f"{path}: log marked {meta.status} at step {meta.failed_step}: "
                        f"{meta.error}")
     spec = spec_of_log(path, meta)
+    require_columns(path, REQUIRED)
     n = num_rows(path)
     dt = spec.mission.dt
     win = choose_window(n, dt, window_start)
@@ -79,7 +80,9 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         for i in range(y.shape[1])
     ]
 
-    cols = read_columns(path, REQUIRED, win.start, win.stop)
+    # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
+    cols = read_columns(path, [c for c in REQUIRED if c not in ("q", "x_tilde", "kappa_G")],
+                        win.start, win.stop)
     rep = win.start + int(np.argmin(cols["s_min_G"]))
     th = theory_at_step(robot, spec, path, rep)
 
@@ -106,13 +109,24 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     }
 
 
+BATCH = 8192  # steps per batched SVD: its ~8 temporaries of 12×12 per step stay near 10 MB
+
+
+def _batches(chunks, size: int = BATCH):
+    """Split each row group's columns into batches of at most ``size`` steps."""
+    for chunk in chunks:
+        n = len(chunk["step"])
+        for lo in range(0, n, size):
+            yield {k: a[lo:lo + size] for k, a in chunk.items()}
+
+
 def rebuild_and_project(robot: GiordanoRobot, path, win: Window
                         ) -> tuple[dict, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
     y (eq. 26) and singular values of Γ over the window."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
     ys, sigmas, V_prev = [], [], None
-    for chunk in iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"]):
+    for chunk in _batches(iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"])):
         part = project_chunk(rebuild_gamma(robot, chunk["q"]), chunk["v"], V_prev)
         V_prev = part.V_last
         diff = np.abs(part.s_min - chunk["s_min_G"])
