@@ -26,7 +26,7 @@ from pipeline.sim.jit import jit
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import attitude_error, quat_from_matrix
-from pipeline.sim.target import build_target, mark_seen
+from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
 
 
@@ -144,9 +144,17 @@ def loop_update(R_tb, R_te, p_e, p_c, M_hat, C_hat, gamma_inv,
 
 @jit
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    """Angle between two vectors in degrees (eq. 18's pointing and boresight errors)."""
+    """Angle between two vectors in degrees."""
     c = (a @ b) / np.sqrt((a @ a) * (b @ b))
     return np.degrees(np.arccos(max(-1.0, min(1.0, c))))
+
+
+@jit
+def pointing_errors(R_tb, p_b, R_te, p_e, aim) -> tuple[float, float]:
+    """Bus pointing error (z_b against the line to the target at the origin) and camera
+    boresight error (z_e against the line to the aim point), in degrees (eq. 18)."""
+    return (angle_deg(np.ascontiguousarray(R_tb[:, 2]), -p_b),
+            angle_deg(np.ascontiguousarray(R_te[:, 2]), aim - p_e))
 
 
 class Mission:
@@ -198,13 +206,13 @@ class Mission:
             s.integral, s.q[7:], K, D, ctrl.gains.posture, self.robot.q_bar,
             ctrl.integrator == "imex", dt, breve_bounds(lim, "acc"), breve_bounds(lim, "rate"),
             com.K, com.D, com.Ki, com.i_max, lim.v_c_acc, lim.v_c_rate, lim.v_max)
+        pointing, boresight = pointing_errors(T.R_tb, T.p_b, T.R_te, T.p_e, ref.aim)
         row = {
             "tau": s.tau, "q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve,
             "v_breve_des": v_des, "x_tilde": x_tilde,
             "s_min_G": T.s_min_G, "kappa_G": T.kappa_G, "s_min_J": T.s_min_J,
             "kappa_J": T.kappa_J, "gamma": gamma, "dt_mu_max": dt * mu_max,
-            "pointing_err_deg": angle_deg(T.R_tb[:, 2].copy(), -T.p_b),
-            "boresight_err_deg": angle_deg(T.R_te[:, 2].copy(), ref.aim - T.p_e),
+            "pointing_err_deg": pointing, "boresight_err_deg": boresight,
             "com_err": math.sqrt(float(com_pos_err @ com_pos_err)),
             "_p_e": T.p_e, "_R_te": T.R_te, **dict(zip(LIMIT_FLAGS, hits, strict=True)),
         }
@@ -221,8 +229,7 @@ class Mission:
         cols |= {c: np.zeros(n, dtype=bool) for c in LIMIT_FLAGS}
         cols["step"] = np.arange(n, dtype=np.int64)
         cols["t"] = np.arange(n) * self.dt
-        seen = np.zeros(len(self.target.points), dtype=bool)
-        n_seen, cam = 0, self.spec.camera
+        coverage = CoverageCounter(self.target, self.spec.camera)
         s = self.initial_state()
         warned: list[str] = []
         # Overflow shows as a non-finite state, caught below at the step it happens.
@@ -239,9 +246,7 @@ class Mission:
                 if not finite:
                     cut = {c: a[:k] for c, a in cols.items()}
                     return MissionResult(cut, "failed", k, f"step {k}: {why}", warned)
-                # coverage (eq. 18): the share of points seen so far
-                n_seen += mark_seen(self.target, row.pop("_p_e"), row.pop("_R_te"), cam, seen)
-                row["coverage"] = n_seen / seen.size
+                row["coverage"] = coverage.update(row.pop("_p_e"), row.pop("_R_te"))
                 for c, val in row.items():
                     cols[c][k] = val
                 if (not warned and self.spec.controller.integrator == "explicit"

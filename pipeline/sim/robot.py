@@ -123,9 +123,8 @@ class GiordanoRobot:
         J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
         M = pin.crba(model, data, q)
         oMb, oMe = data.oMi[1], data.oMf[fid]
-        p_bc, _, _, _, J_bar_v, J_oplus, G_wb = tt.kinematic_terms(
-            oMb.rotation, oMb.translation, oMe.rotation, oMe.translation, J_e, M, self.mass)
-        return tt.gamma_matrix(np.ascontiguousarray(oMb.rotation), p_bc, J_bar_v, G_wb, J_oplus)
+        return tt.gamma_of_placements(oMb.rotation, oMb.translation, oMe.rotation,
+                                      oMe.translation, J_e, M, self.mass)
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
         """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.

@@ -59,12 +59,21 @@ def visible(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Came
                         cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)))
 
 
-def mark_seen(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Camera,
-              seen: np.ndarray) -> int:
-    """Mark the points visible now in ``seen`` (in place); the number newly seen (eq. 18)."""
-    return mark_visible(target.points, target.normals, np.ascontiguousarray(p_e),
-                        np.ascontiguousarray(R_te), np.tan(np.deg2rad(cam.fov_deg) / 2),
-                        cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)), seen)
+class CoverageCounter:
+    """The set of target points seen so far by a camera (eq. 18), updated in place."""
+
+    def __init__(self, target: TargetGeometry, cam: Camera):
+        self.target = target
+        self.seen = np.zeros(len(target.points), dtype=bool)
+        self.n_seen = 0
+        self._limits = (np.tan(np.deg2rad(cam.fov_deg) / 2), cam.d_min, cam.d_max,
+                        np.cos(np.deg2rad(cam.max_angle_deg)))
+
+    def update(self, p_e: np.ndarray, R_te: np.ndarray) -> float:
+        """Mark what the camera at (p_e, R_te) sees; the coverage so far (a fraction)."""
+        self.n_seen += mark_visible(self.target.points, self.target.normals, p_e, R_te,
+                                    *self._limits, self.seen)
+        return self.n_seen / self.seen.size
 
 
 @jit

@@ -145,6 +145,13 @@ def task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping):
 
 
 @jit
+def gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass):
+    """Γ alone (eqs. 2–5) from the placements, J_e and M: the analysis' rebuild."""
+    p_bc, _, _, _, J_bar_v, J_oplus, G_wb = kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass)
+    return gamma_matrix(np.ascontiguousarray(R_tb), p_bc, J_bar_v, G_wb, J_oplus)
+
+
+@jit
 def full_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping, v, dJ_e, Ag, dAg, C):
     """Eqs. 2–9 in one call: :func:`task_transform`, then Γ̇, M̂ and Ĉ."""
     (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
