@@ -149,7 +149,7 @@ class GiordanoRobot:
             C = pin.computeCoriolisMatrix(model, data, q, v)
             pin.computeCentroidalMapTimeVariation(model, data, q, v)
             (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
-             gamma_dot, M_hat, C_hat) = tt.full_transform(
+             gamma_dot, M_hat, C_hat, s_min_G, kappa_G) = tt.full_transform(
                 R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping, v, dJ_e, data.Ag,
                 data.dAg, C)
         else:
@@ -157,7 +157,7 @@ class GiordanoRobot:
              gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,
                                             self.damping)
             gamma_dot = C = M_hat = C_hat = self._zero_12
-        s_min_G, kappa_G = sigma_min_and_cond(gamma)
+            s_min_G, kappa_G = sigma_min_and_cond(gamma)
         return Terms(R_tb, p_b, p_c, p_e, R_te, p_bc, J_bar_v, J_oplus, J_inv, G_wb, gamma,
                      gamma_inv, gamma_dot, M, C, M_hat, C_hat, float(s_min_J), float(kappa_J),
                      float(s_min_G), float(kappa_G))

@@ -11,8 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg.lapack import dgesdd
 
+from pipeline.sim.jit import jit
+from pipeline.sim.svd import singular_values
 from pipeline.spec import ConfigSampling, Ramp
 
 
@@ -21,21 +22,20 @@ def sigma_min(A: np.ndarray) -> float | None:
     A = np.asarray(A, dtype=float)
     if not np.all(np.isfinite(A)):
         return None
-    s = np.linalg.svd(A, compute_uv=False)
+    s = singular_values(A)
     return float(s[-1]) if np.all(np.isfinite(s)) else None
 
 
+@jit
 def sigma_min_and_cond(A: np.ndarray) -> tuple[float, float]:
     """(σ_min, κ = σ_max/σ_min) from one SVD pass (eq. 19); κ = inf when σ_min = 0.
 
-    LAPACK's dgesdd without singular vectors, called directly: the simulator reads Γ's
-    conditioning every step, and NumPy's wrapper costs more than the decomposition.
+    One call of LAPACK's dgesdd without singular vectors (:mod:`pipeline.sim.svd`), so the
+    simulator reads Γ's conditioning inside its compiled per-step kernel.
     """
-    _, s, _, info = dgesdd(np.asarray(A, dtype=float), compute_uv=0)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (dgesdd info {info})")
-    smin = float(s[-1])
-    return smin, (float(s[0] / smin) if smin > 0 else float("inf"))
+    s = singular_values(A)
+    smin = s[-1]
+    return smin, (s[0] / smin if smin > 0 else np.inf)
 
 
 def scale_by_svd(sigma: float, low: float, high: float, floor: float) -> float:

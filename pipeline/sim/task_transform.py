@@ -15,6 +15,7 @@ import numpy as np
 
 from pipeline.sim.jit import jit
 from pipeline.sim.rotations import skew
+from pipeline.sim.sampling import sigma_min_and_cond
 
 
 @jit
@@ -153,11 +154,12 @@ def gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 @jit
 def full_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping, v, dJ_e, Ag, dAg, C):
-    """Eqs. 2–9 in one call: :func:`task_transform`, then Γ̇, M̂ and Ĉ."""
+    """Eqs. 2–9 and 19 in one call: :func:`task_transform`, then Γ̇, M̂, Ĉ and Γ's (σ_min, κ)."""
     (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
      gamma_inv) = task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping)
     gamma_dot = gamma_time_derivative(np.ascontiguousarray(R_tb), R_te, R_eb, p_bc, p_ec,
                                       J_bar_v, J_e, v, dJ_e, Ag, dAg, mass)
     M_hat, C_hat = transformed_dynamics(M, C, gamma_inv, gamma_dot)
+    s_min_G, kappa_G = sigma_min_and_cond(gamma)
     return (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
-            gamma_dot, M_hat, C_hat)
+            gamma_dot, M_hat, C_hat, s_min_G, kappa_G)
