@@ -87,7 +87,6 @@ class GiordanoRobot:
         self.q_bar = np.asarray(spec.robot.q_bar, dtype=float)
         self.floor = spec.robot.damped_inverse.floor
         self.damping = spec.robot.damped_inverse.damping
-        self._zero_v = np.zeros(self.model.nv)
         self._zero_12 = np.zeros((self.model.nv, self.model.nv))
         self._zero_12.flags.writeable = False
 
