@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.sim.breve_controller import damping_rates  # noqa: F401  (μ, eq. 21)
+from pipeline.sim.rotations import skew
 
 
 def critical_step(mu_max: float) -> float:
@@ -98,8 +99,7 @@ def attitude_jacobian(x_att: np.ndarray) -> np.ndarray:
     """E = η I + [ε]× from a logged attitude error x̃ = 2ε, η = √(1 − ‖ε‖²) (eq. 14)."""
     eps = 0.5 * np.asarray(x_att, dtype=float)
     eta = np.sqrt(max(0.0, 1.0 - eps @ eps))
-    return eta * np.eye(3) + np.array([[0, -eps[2], eps[1]], [eps[2], 0, -eps[0]],
-                                       [-eps[1], eps[0], 0]])
+    return eta * np.eye(3) + skew(eps)
 
 
 def task_jacobian(x_tilde: np.ndarray, R_te: np.ndarray) -> np.ndarray:
