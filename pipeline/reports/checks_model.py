@@ -64,7 +64,7 @@ def _camera_twist() -> Outcome:
 
 
 @check("2", "CoM velocity from joints alone, R_tb J̄_v q̇, vs finite differences of p_c",
-       "pipeline.sim.robot.Terms.J_bar_v", "pipeline.sim.robot.Kinematics.J_bar_v",
+       "pipeline.sim.robot.Terms.J_bar_v",
        "pipeline.sim.task_transform.kinematic_terms")
 def _j_bar_v() -> Outcome:
     q, v = random_state(2)
@@ -76,7 +76,7 @@ def _j_bar_v() -> Outcome:
 
 
 @check("3", "camera twist about the CoM from joints alone, J⊕ q̇, vs finite differences",
-       "pipeline.sim.robot.Terms.J_oplus", "pipeline.sim.robot.Kinematics.J_oplus",
+       "pipeline.sim.robot.Terms.J_oplus",
        "pipeline.sim.task_transform.kinematic_terms")
 def _j_oplus() -> Outcome:
     q, v = random_state(3)
@@ -88,7 +88,7 @@ def _j_oplus() -> Outcome:
 
 
 @check("4", "camera twist about the CoM from the bus rate alone, G_ωb ω_b, vs finite differences",
-       "pipeline.sim.robot.Terms.G_wb", "pipeline.sim.robot.Kinematics.G_wb",
+       "pipeline.sim.robot.Terms.G_wb",
        "pipeline.sim.task_transform.kinematic_terms")
 def _g_wb() -> Outcome:
     q, v = random_state(4)

@@ -55,8 +55,13 @@ def visible(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Came
     Occlusion is not modelled.
     """
     return visible_mask(target.points, target.normals, np.ascontiguousarray(p_e),
-                        np.ascontiguousarray(R_te), np.tan(np.deg2rad(cam.fov_deg) / 2),
-                        cam.d_min, cam.d_max, np.cos(np.deg2rad(cam.max_angle_deg)))
+                        np.ascontiguousarray(R_te), *camera_limits(cam))
+
+
+def camera_limits(cam: Camera) -> tuple[float, float, float, float]:
+    """(tan(fov/2), d_min, d_max, cos(max_angle)): the camera's bounds as the kernels take them."""
+    return (np.tan(np.deg2rad(cam.fov_deg) / 2), cam.d_min, cam.d_max,
+            np.cos(np.deg2rad(cam.max_angle_deg)))
 
 
 class CoverageCounter:
@@ -66,8 +71,7 @@ class CoverageCounter:
         self.target = target
         self.seen = np.zeros(len(target.points), dtype=bool)
         self.n_seen = 0
-        self._limits = (np.tan(np.deg2rad(cam.fov_deg) / 2), cam.d_min, cam.d_max,
-                        np.cos(np.deg2rad(cam.max_angle_deg)))
+        self._limits = camera_limits(cam)
 
     def update(self, p_e: np.ndarray, R_te: np.ndarray) -> float:
         """Mark what the camera at (p_e, R_te) sees; the coverage so far (a fraction)."""
