@@ -68,5 +68,8 @@ baselines: $(STAMP)
 repin: $(STAMP)
 	$(PY) -m pipeline.reports.baselines repin
 
+# Compiled kernels: all but the newest cache folder (one per version of pipeline/sim/*.py).
 clean:
 	rm -rf $(REPORTS) $(LOGS)/nominal $(LOGS)/omega_ripple_* $(LOGS)/short_* $(LOGS)/sweeps
+	ls -td pipeline/sim/__pycache__/numba-* 2>/dev/null | tail -n +2 | xargs rm -rf
+	rm -f pipeline/sim/__pycache__/*.nbi pipeline/sim/__pycache__/*.nbc

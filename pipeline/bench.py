@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.analysis import signals
@@ -46,74 +47,97 @@ def _stats(samples: list[float]) -> dict:
             "repeats": len(a)}
 
 
-def floor_us(robot: GiordanoRobot, q: np.ndarray, v: np.ndarray, repeats: int) -> dict:
-    """Per-step cost of the Pinocchio calls of one step, over the given states."""
+def floor_once(robot: GiordanoRobot, q: np.ndarray, v: np.ndarray) -> float:
+    """Per-step cost (µs) of the Pinocchio calls of one step, over the given states."""
     model, data, fid = robot.model, robot.data, robot.frame_id
-    out = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for qk, vk in zip(q, v, strict=True):
-            pin.computeJointJacobiansTimeVariation(model, data, qk, vk)
-            pin.updateFramePlacement(model, data, fid)
-            pin.getFrameJacobian(model, data, fid, LOCAL)
-            pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
-            pin.crba(model, data, qk)
-            pin.computeCoriolisMatrix(model, data, qk, vk)
-            pin.computeCentroidalMapTimeVariation(model, data, qk, vk)
-        out.append((time.perf_counter() - t0) / len(q) * 1e6)
-    return _stats(out)
+    t0 = time.perf_counter()
+    for qk, vk in zip(q, v, strict=True):
+        pin.computeJointJacobiansTimeVariation(model, data, qk, vk)
+        pin.updateFramePlacement(model, data, fid)
+        pin.getFrameJacobian(model, data, fid, LOCAL)
+        pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
+        pin.crba(model, data, qk)
+        pin.computeCoriolisMatrix(model, data, qk, vk)
+        pin.computeCentroidalMapTimeVariation(model, data, qk, vk)
+    return (time.perf_counter() - t0) / len(q) * 1e6
 
 
-def sim_step_us(spec: Spec, repeats: int) -> dict:
-    """Per-step cost of ``Mission.run`` (construction excluded)."""
-    out = []
-    for _ in range(repeats):
-        mission = Mission(spec)
-        t0 = time.perf_counter()
-        mission.run()
-        out.append((time.perf_counter() - t0) / spec.n_steps * 1e6)
-    return _stats(out)
+def sim_once(spec: Spec) -> float:
+    """Per-step cost (µs) of ``Mission.run`` (construction excluded)."""
+    mission = Mission(spec)
+    t0 = time.perf_counter()
+    mission.run()
+    return (time.perf_counter() - t0) / spec.n_steps * 1e6
 
 
-def analysis_step_us(path: Path, spec: Spec, repeats: int) -> dict:
-    """Per-step cost of stages 1–3 on a log: Γ rebuild, per-direction SVD, lag-1."""
-    robot = GiordanoRobot(spec)
+def analysis_once(robot: GiordanoRobot, path: Path) -> float:
+    """Per-step cost (µs) of stages 1–3 on a log: Γ rebuild, per-direction SVD, lag-1."""
     n = pq.ParquetFile(path).metadata.num_rows
-    out = []
+    t0 = time.perf_counter()
+    _, y, _ = rebuild_and_project(robot, path, Window(n // 2, n, "bench"))
+    signals.lag1_autocorrelation(y)
+    signals.step_rms(y)
+    return (time.perf_counter() - t0) / n * 1e6
+
+
+def step_costs(spec: Spec, log: Path, repeats: int) -> dict:
+    """Floor, simulator and analysis per step, measured back to back in each repeat.
+
+    On a shared host the speed drifts between repeats; a ratio taken within one repeat
+    compares like with like, so the ratios are the median of the per-repeat ratios.
+    """
+    cols = pq.read_table(log, columns=["q", "v"])
+    q = np.stack(cols.column("q").to_numpy(zero_copy_only=False))
+    v = np.stack(cols.column("v").to_numpy(zero_copy_only=False))
+    robot = GiordanoRobot(spec)
+    floor, sim, ana = [], [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        _, y, _ = rebuild_and_project(robot, path, Window(n // 2, n, "bench"))
-        signals.lag1_autocorrelation(y)
-        signals.step_rms(y)
-        out.append((time.perf_counter() - t0) / n * 1e6)
-    return _stats(out)
+        floor.append(floor_once(robot, q, v))
+        sim.append(sim_once(spec))
+        ana.append(analysis_once(robot, log))
+    f = np.asarray(floor)
+    return {"floor_us": _stats(floor), "sim_step_us": _stats(sim), "analysis_step_us": _stats(ana),
+            "sim_ratio": _stats(list(np.asarray(sim) / f)),
+            "analysis_ratio": _stats(list(np.asarray(ana) / f))}
 
 
-def growth(spec: Spec, lengths: list[int]) -> dict:
-    """Wall time of missions of the given step counts and the fitted exponent of t ∝ Nᵖ."""
-    walls = []
+def growth(spec: Spec, lengths: list[int], repeats: int) -> dict:
+    """Median wall time of missions of the given step counts and the fitted exponent of
+    t ∝ Nᵖ (least squares in log–log)."""
+    walls, spread = [], []
     for n in lengths:
         s = with_overrides(spec, {"mission.duration": n * spec.mission.dt})
-        mission = Mission(s)
-        t0 = time.perf_counter()
-        mission.run()
-        walls.append(time.perf_counter() - t0)
+        times = []
+        for _ in range(repeats):
+            mission = Mission(s)
+            t0 = time.perf_counter()
+            mission.run()
+            times.append(time.perf_counter() - t0)
+        walls.append(float(np.median(times)))
+        spread.append(_stats(times))
     p = float(np.polyfit(np.log(lengths), np.log(walls), 1)[0])
-    return {"steps": lengths, "wall_s": walls, "exponent": p}
+    return {"steps": lengths, "wall_s": walls, "wall_stats": spread, "exponent": p}
 
 
 def tiled_log(src: Path, dst: Path, factor: int) -> Path:
-    """A log of ``factor`` times the rows of ``src``, its rows repeated (same metadata).
+    """A log of ``factor`` times the rows of ``src``: its rows repeated, with ``step`` and ``t``
+    numbered on (same metadata), so the analysis window is the second half of the long log.
 
     The analysis' cost per step does not depend on the trajectory, so a long log for the
     memory measurement need not be simulated.
     """
     pf = pq.ParquetFile(src)
+    n = pf.metadata.num_rows
+    dt = json.loads(pf.schema_arrow.metadata[b"pipeline.spec"])["mission"]["dt"]
     dst.parent.mkdir(parents=True, exist_ok=True)
     with pq.ParquetWriter(dst, pf.schema_arrow, compression="zstd") as w:
-        for _ in range(factor):
+        for i in range(factor):
             for rg in range(pf.num_row_groups):
-                w.write_table(pf.read_row_group(rg))
+                t = pf.read_row_group(rg)
+                step = t.column("step").to_numpy() + i * n
+                t = t.set_column(t.schema.get_field_index("step"), "step", pa.array(step))
+                t = t.set_column(t.schema.get_field_index("t"), "t", pa.array(step * dt))
+                w.write_table(t)
     return dst
 
 
@@ -151,26 +175,19 @@ def machine() -> dict:
 
 def run_bench(out_dir: Path, quick: bool = False) -> dict:
     spec = load_spec("nominal")
-    repeats = 3 if quick else 5
+    repeats = 3 if quick else 7
+    repeats_growth = 1 if quick else 3
     base_steps = 1000 if quick else spec.n_steps
     base = with_overrides(spec, {"mission.duration": base_steps * spec.mission.dt})
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         _progress("warm-up and reference run")
         log = run_spec(base, tmp / "logs").path
-        cols = pq.read_table(log, columns=["q", "v"])
-        q = np.stack(cols.column("q").to_numpy(zero_copy_only=False))
-        v = np.stack(cols.column("v").to_numpy(zero_copy_only=False))
-        robot = GiordanoRobot(base)
-        _progress("floor")
-        floor = floor_us(robot, q, v, repeats)
-        _progress("simulator step")
-        sim = sim_step_us(base, repeats)
-        _progress("analysis step")
-        ana = analysis_step_us(log, base, repeats)
+        _progress(f"floor, simulator and analysis steps, {repeats} repeats")
+        costs = step_costs(base, log, repeats)
         lengths = [1000, 3000, 10000] if quick else [1000, 10000, 100000]
-        _progress(f"growth over {lengths} steps")
-        grow = growth(spec, lengths)
+        _progress(f"growth over {lengths} steps, {repeats_growth} repeats each")
+        grow = growth(spec, lengths, repeats_growth)
         _progress("peak memory")
         n_mem = 10000 if quick else 100000
         long = run_spec(with_overrides(spec, {"mission.duration": n_mem * spec.mission.dt},
@@ -179,14 +196,16 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
                   f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
     result = {
-        "floor_us": floor,
-        "sim_step_us": sim,
-        "sim_ratio": sim["median"] / floor["median"],
-        "analysis_step_us": ana,
-        "analysis_ratio": ana["median"] / floor["median"],
+        "floor_us": costs["floor_us"],
+        "sim_step_us": costs["sim_step_us"],
+        "sim_ratio": costs["sim_ratio"]["median"],
+        "sim_ratio_stats": costs["sim_ratio"],
+        "analysis_step_us": costs["analysis_step_us"],
+        "analysis_ratio": costs["analysis_ratio"]["median"],
+        "analysis_ratio_stats": costs["analysis_ratio"],
         "growth": grow,
         "peak_memory_mb": memory,
-        "steps_per_s": 1e6 / sim["median"],
+        "steps_per_s": 1e6 / costs["sim_step_us"]["median"],
         "quick": quick,
         "machine": machine(),
     }
@@ -206,7 +225,9 @@ def bench_markdown(r: dict) -> str:
 
     g = r["growth"]
     mem = "\n".join(f"| {n} | {mb:.0f} |" for n, mb in r["peak_memory_mb"].items())
-    grow = "\n".join(f"| {n} | {w:.2f} |" for n, w in zip(g["steps"], g["wall_s"], strict=True))
+    grow = "\n".join(f"| {n} | {w['median']:.2f} | {w['min']:.2f} | {w['max']:.2f} |"
+                     for n, w in zip(g["steps"], g["wall_stats"], strict=True))
+    sr, ar = r["sim_ratio_stats"], r["analysis_ratio_stats"]
     m = r["machine"]
     return f"""# Benchmark
 
@@ -219,13 +240,19 @@ Pinocchio {m['pinocchio']}, Numba {m['numba']}.{' Quick mode (shorter runs).' if
 {row('simulator: whole controller step', r['sim_step_us'])}
 {row('analysis: Γ rebuild, per-direction SVD, lag-1', r['analysis_step_us'])}
 
-- sim_ratio = {r['sim_ratio']:.2f} (target ≤ 10); analysis_ratio = {r['analysis_ratio']:.2f}
-  (target ≤ 3); {r['steps_per_s']:.0f} simulator steps per second.
+Each repeat measures the floor, the simulator and the analysis back to back; a ratio is the
+median over repeats of that repeat's step / floor (min–max in brackets).
+
+- sim_ratio = {r['sim_ratio']:.2f} [{sr['min']:.2f}–{sr['max']:.2f}] (target ≤ 10)
+- analysis_ratio = {r['analysis_ratio']:.2f} [{ar['min']:.2f}–{ar['max']:.2f}] (target ≤ 3)
+- {r['steps_per_s']:.0f} simulator steps per second.
 
 ## Growth with mission length (fitted exponent {g['exponent']:.3f})
 
-| steps | wall (s) |
-|---|---|
+Median wall time of {g['wall_stats'][0]['repeats']} run(s) per length.
+
+| steps | wall (s) | min | max |
+|---|---|---|---|
 {grow}
 
 ## Peak memory of `analyze` (max RSS of a fresh process)

@@ -20,6 +20,7 @@ from conftest import SEEDS, run_cli
 from pipeline.errors import LogError, RunFailed
 from pipeline.logs import num_rows, read_columns, read_meta
 from pipeline.sim import breve_controller as bc
+from pipeline.sim.base_guidance import BaseGuidance
 from pipeline.sim.limits import LIMIT_FLAGS, saturate
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import GiordanoRobot
@@ -500,19 +501,18 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
 # -- non-finite state --------------------------------------------------------------------------
 
 def test_nan_state_stops_the_run_and_is_logged_failed(tmp_path, monkeypatch):
+    """A NaN reference at step n_ok makes that step's new state non-finite."""
     n_ok = 5
-    original = Mission.step
+    original = BaseGuidance.reference_into
     calls = {"n": 0}
 
-    def poisoned(self, s):
-        nxt, row = original(self, s)
+    def poisoned(self, out, tau, p_b):
+        original(self, out, tau, p_b)
         calls["n"] += 1
         if calls["n"] > n_ok:
-            nxt.v = nxt.v.copy()
-            nxt.v[4] = np.nan
-        return nxt, row
+            out[:] = np.nan
 
-    monkeypatch.setattr(Mission, "step", poisoned)
+    monkeypatch.setattr(BaseGuidance, "reference_into", poisoned)
     spec = _three_seconds("short_nominal")
     with pytest.raises(RunFailed, match="failed"):
         run_spec(spec, tmp_path)
@@ -520,7 +520,7 @@ def test_nan_state_stops_the_run_and_is_logged_failed(tmp_path, monkeypatch):
     meta = read_meta(log)
     assert meta.status == "failed"
     assert meta.failed_step == n_ok
-    assert "non-finite" in meta.error
+    assert "non-finite" in meta.error or "NaN" in meta.error  # seen by the check or by LAPACK
     cols = read_columns(log, ["step", "v", "q"])
     np.testing.assert_array_equal(cols["step"], np.arange(n_ok))
     assert np.all(np.isfinite(cols["v"])) and np.all(np.isfinite(cols["q"]))

@@ -1,8 +1,10 @@
 """Rebuild Γ from the logged q and project the logged velocity on its singular directions.
 
 Stage 1 (provenance) and stage 2 (per-direction SVD, eq. 26) of DESIGN §3. Γ is rebuilt at
-every step by the simulator's own code path (``GiordanoRobot.terms``) from q alone; nothing
-logged but q and v is trusted. The SVD runs batched over each row group.
+every step by the simulator's own kernels (``GiordanoRobot.gamma_matrices``) from q alone;
+nothing logged but q and v is trusted. The SVDs run batched, compiled, over slices of the log:
+singular values alone where only the provenance needs them, with the right-singular vectors
+in the analysis window.
 """
 
 from __future__ import annotations
@@ -12,14 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.svd import svd_right
 
 
 def rebuild_gamma(robot: GiordanoRobot, q: np.ndarray) -> np.ndarray:
     """Γ(q_k) for every row of q (N×13) → N×12×12 (eq. 26), by the simulator's own code."""
-    out = np.empty((len(q), 12, 12))
-    for k, qk in enumerate(q):
-        out[k] = robot.gamma_matrix_at(qk)
-    return out
+    return robot.gamma_matrices(q)
 
 
 def sign_continuous(V: np.ndarray, previous: np.ndarray | None = None) -> np.ndarray:
@@ -52,7 +52,7 @@ class DirectionChunk:
 def project_chunk(gamma: np.ndarray, v: np.ndarray,
                   V_prev: np.ndarray | None = None) -> DirectionChunk:
     """Batched SVD of Γ_k = U S Vᵀ and y_i,k = u_iᵀ Γ_k v_k = σ_i (v_iᵀ v_k) (eq. 26)."""
-    _, s, Vt = np.linalg.svd(gamma)
+    s, Vt = svd_right(gamma)
     V = sign_continuous(np.swapaxes(Vt, 1, 2), V_prev)
     y = s * np.einsum("kji,kj->ki", V, v)
     return DirectionChunk(s, y, s[:, -1], s[:, 0] / s[:, -1], V[-1])

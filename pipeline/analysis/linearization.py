@@ -26,9 +26,13 @@ class StaticGuidance:
 
     def __init__(self, ref: Reference):
         self.ref = ref
+        self._vector = ref.as_vector()
 
     def reference(self, tau: float, p_b: np.ndarray | None = None) -> Reference:
         return self.ref
+
+    def reference_into(self, out: np.ndarray, tau: float, p_b: np.ndarray) -> None:
+        out[:] = self._vector
 
 
 @dataclass(frozen=True)

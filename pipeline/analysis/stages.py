@@ -18,6 +18,7 @@ from pipeline.logs import iter_columns, num_rows, read_columns, read_meta, requi
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.svd import batched_singular_values
 from pipeline.spec import Spec, SpecError, build_spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "x_tilde", "dt_mu_max",
@@ -123,20 +124,28 @@ def _batches(chunks, size: int = BATCH):
 def rebuild_and_project(robot: GiordanoRobot, path, win: Window
                         ) -> tuple[dict, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
-    y (eq. 26) and singular values of Γ over the window."""
+    y (eq. 26) and singular values of Γ over the window (singular vectors only there)."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
     ys, sigmas, V_prev = [], [], None
     for chunk in _batches(iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"])):
-        part = project_chunk(rebuild_gamma(robot, chunk["q"]), chunk["v"], V_prev)
-        V_prev = part.V_last
-        diff = np.abs(part.s_min - chunk["s_min_G"])
+        gamma = rebuild_gamma(robot, chunk["q"])
+        keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
+        sigma = np.empty((len(gamma), gamma.shape[1]))
+        sigma[~keep] = batched_singular_values(gamma[~keep])
+        if keep.any():
+            part = project_chunk(gamma[keep], chunk["v"][keep], V_prev)
+            V_prev = part.V_last
+            sigma[keep] = part.sigma
+            ys.append(part.y)
+            sigmas.append(part.sigma)
+        diff = np.abs(sigma[:, -1] - chunk["s_min_G"])
         if diff.size and diff.max() > worst:
             worst, worst_step = float(diff.max()), int(chunk["step"][np.argmax(diff)])
-        rel_k = np.abs(part.kappa - chunk["kappa_G"]) / chunk["kappa_G"]
+        rel_k = np.abs(sigma[:, 0] / sigma[:, -1] - chunk["kappa_G"]) / chunk["kappa_G"]
         worst_kappa = max(worst_kappa, float(rel_k.max(initial=0.0)))
-        keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
-        ys.append(part.y[keep])
-        sigmas.append(part.sigma[keep])
+    if not ys:
+        raise LogError(f"{path}: no row's step lies in the analysis window "
+                       f"[{win.start}, {win.stop}): the step column is not 0, 1, …")
     prov = {"max_abs_s_min_G": worst, "worst_step": worst_step, "max_rel_kappa_G": worst_kappa,
             "tolerance": PROVENANCE_TOL}
     return prov, np.concatenate(ys), np.concatenate(sigmas)

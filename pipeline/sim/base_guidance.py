@@ -17,6 +17,11 @@ from pipeline.spec import Guidance
 
 _H = 1e-4  # s, central-difference step for the attitude references' rates
 
+# The references as one flat vector, the step kernel's input: (field, size), 3×3 row-major.
+REFERENCE_FIELDS = (("p_c", 3), ("v_c", 3), ("a_c", 3), ("R_b", 9), ("w_b", 3), ("p_e", 3),
+                    ("v_e", 3), ("R_e", 9), ("w_e", 3), ("aim", 3))
+REFERENCE_SIZE = sum(n for _, n in REFERENCE_FIELDS)
+
 
 @dataclass(frozen=True)
 class Reference:
@@ -32,6 +37,19 @@ class Reference:
     R_e: np.ndarray
     w_e: np.ndarray
     aim: np.ndarray
+
+    def as_vector(self) -> np.ndarray:
+        """The fields flattened in the order of ``REFERENCE_FIELDS``."""
+        return np.concatenate([np.ravel(getattr(self, f)) for f, _ in REFERENCE_FIELDS])
+
+    @classmethod
+    def from_vector(cls, r: np.ndarray) -> Reference:
+        """Inverse of :meth:`as_vector`."""
+        out, i = {}, 0
+        for f, n in REFERENCE_FIELDS:
+            out[f] = r[i:i + n].reshape((3, 3) if n == 9 else (3,)).copy()
+            i += n
+        return cls(**out)
 
 
 @jit
@@ -76,6 +94,24 @@ def references(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude, aim_perio
     return p_c, v_c, a_c, R_b, w_b, p_e, (p_ep - p_em) / (2 * h), R_e, w_e, aim
 
 
+@jit
+def reference_vector(out, tau, p_b, use_p_b, params):
+    """:func:`references` written into ``out`` in the order of ``REFERENCE_FIELDS``;
+    ``params`` = [phase, radius, ω, aim amplitude, aim period, h, o_ce_b (3), x_e_b (3)]."""
+    p_c, v_c, a_c, R_b, w_b, p_e, v_e, R_e, w_e, aim = references(
+        tau, p_b, use_p_b, params[0], params[1], params[2], params[3], params[4],
+        params[6:9].copy(), params[9:12].copy(), params[5])
+    out[:] = np.concatenate((p_c, v_c, a_c, R_b.ravel(), w_b, p_e, v_e, R_e.ravel(), w_e, aim))
+
+
+@jit
+def unpack_reference(r):
+    """The fields of a reference vector (``REFERENCE_FIELDS``), as contiguous arrays."""
+    return (r[0:3].copy(), r[3:6].copy(), r[6:9].copy(), r[9:18].copy().reshape((3, 3)),
+            r[18:21].copy(), r[21:24].copy(), r[24:27].copy(), r[27:36].copy().reshape((3, 3)),
+            r[36:39].copy(), r[39:42].copy())
+
+
 class BaseGuidance:
     """References for an inspection orbit about a target at the t-frame origin."""
 
@@ -86,6 +122,8 @@ class BaseGuidance:
         self.omega = 2 * np.pi / cfg.orbit_period
         self.phase = float(np.deg2rad(cfg.orbit_phase_deg))
         self._zero3 = np.zeros(3)
+        self._params = np.array([self.phase, cfg.orbit_radius, self.omega, cfg.aim_amplitude,
+                                 cfg.aim_period, _H, *self.o_ce_b, *self.x_e_b])
 
     def reference(self, tau: float, p_b: np.ndarray | None = None) -> Reference:
         """References at τ. With the bus position ``p_b`` the desired bus z-axis points from
@@ -97,3 +135,8 @@ class BaseGuidance:
             tau, self._zero3 if p_b is None else p_b, p_b is not None, self.phase,
             c.orbit_radius, self.omega, c.aim_amplitude, c.aim_period, self.o_ce_b, self.x_e_b,
             _H))
+
+    def reference_into(self, out: np.ndarray, tau: float, p_b: np.ndarray) -> None:
+        """:meth:`reference` at (τ, p_b) as one vector (``REFERENCE_FIELDS``), into ``out``:
+        the simulator's per-step form, one compiled call and no objects."""
+        reference_vector(out, tau, p_b, True, self._params)

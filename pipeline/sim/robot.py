@@ -115,15 +115,41 @@ class GiordanoRobot:
 
     # -- per-state terms ------------------------------------------------------------------
     def gamma_matrix_at(self, q: np.ndarray) -> np.ndarray:
-        """Γ(q) alone (eq. 5), by the same kernels as :meth:`terms`: the analysis' rebuild."""
+        """Γ(q) alone (eq. 5), by the same kernels as :meth:`terms`."""
+        return self.gamma_matrices(q[None])[0]
+
+    def gamma_matrices(self, q: np.ndarray) -> np.ndarray:
+        """Γ(q_k) for every row of q (N×13 → N×12×12, eq. 5): the analysis' rebuild, by the
+        simulator's kernels, so a Γ rebuilt from a logged q is the simulator's to the bit."""
+        model, data, fid, mass = self.model, self.data, self.frame_id, self.mass
+        out = np.empty((len(q), model.nv, model.nv))
+        for k, qk in enumerate(q):
+            pin.computeJointJacobians(model, data, qk)
+            pin.updateFramePlacement(model, data, fid)
+            J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
+            M = pin.crba(model, data, qk)
+            oMb, oMe = data.oMi[1], data.oMf[fid]
+            tt.gamma_into(out, k, oMb.rotation, oMb.translation, oMe.rotation, oMe.translation,
+                          J_e, M, mass)
+        return out
+
+    def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Pinocchio's outputs at (q, v) that eqs. 2–11 take, each routine run once:
+        (R_tb, p_b, R_te, p_e, J_e, J̇_e, M, C, A_g, Ȧ_g), camera Jacobians in the LOCAL frame.
+
+        Some are views of Pinocchio's data, valid until its next call.
+        """
         model, data, fid = self.model, self.data, self.frame_id
-        pin.computeJointJacobians(model, data, q)
+        pin.computeJointJacobiansTimeVariation(model, data, q, v)
         pin.updateFramePlacement(model, data, fid)
         J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
         M = pin.crba(model, data, q)
+        dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
+        C = pin.computeCoriolisMatrix(model, data, q, v)
+        pin.computeCentroidalMapTimeVariation(model, data, q, v)
         oMb, oMe = data.oMi[1], data.oMf[fid]
-        return tt.gamma_of_placements(oMb.rotation, oMb.translation, oMe.rotation,
-                                      oMe.translation, J_e, M, self.mass)
+        return (oMb.rotation, oMb.translation, oMe.rotation, oMe.translation, J_e, dJ_e, M, C,
+                data.Ag, data.dAg)
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
         """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.
@@ -131,26 +157,23 @@ class GiordanoRobot:
         With ``dynamics=False`` only the kinematic terms (Γ, Γ⁻¹, conditioning) are computed
         and v is not used; the dynamic fields are zeros.
         """
-        model, data, fid, m = self.model, self.data, self.frame_id, self.mass
         if dynamics:
-            pin.computeJointJacobiansTimeVariation(model, data, q, v)
+            R_tb, p_b, R_te, p_e, J_e, dJ_e, M, C, Ag, dAg = self.dynamics_inputs(q, v)
         else:
+            model, data, fid = self.model, self.data, self.frame_id
             pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacement(model, data, fid)
-        J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
-        M = pin.crba(model, data, q)
-        oMb, oMe = data.oMi[1], data.oMf[fid]
+            pin.updateFramePlacement(model, data, fid)
+            J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
+            M = pin.crba(model, data, q)
+            R_tb, p_b = data.oMi[1].rotation, data.oMi[1].translation
+            R_te, p_e = data.oMf[fid].rotation, data.oMf[fid].translation
         # Copies: Pinocchio's arrays view its data, which the next call overwrites.
-        R_tb, p_b = oMb.rotation.copy(), oMb.translation.copy()
-        R_te, p_e = oMe.rotation.copy(), oMe.translation.copy()
+        R_tb, p_b, R_te, p_e = R_tb.copy(), p_b.copy(), R_te.copy(), p_e.copy()
+        m = self.mass
         if dynamics:
-            dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
-            C = pin.computeCoriolisMatrix(model, data, q, v)
-            pin.computeCentroidalMapTimeVariation(model, data, q, v)
             (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
              gamma_dot, M_hat, C_hat, s_min_G, kappa_G) = tt.full_transform(
-                R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping, v, dJ_e, data.Ag,
-                data.dAg, C)
+                R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping, v, dJ_e, Ag, dAg, C)
         else:
             (p_bc, p_c, _, _, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
              gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,

@@ -38,6 +38,7 @@ def sigma_min_and_cond(A: np.ndarray) -> tuple[float, float]:
     return smin, (s[0] / smin if smin > 0 else np.inf)
 
 
+@jit
 def scale_by_svd(sigma: float, low: float, high: float, floor: float) -> float:
     """The γ ramp (eq. 20).
 

@@ -1,9 +1,10 @@
-"""Singular values alone, from LAPACK's dgesdd (jobz = 'N'), callable inside compiled kernels.
+"""Singular values, and right-singular vectors, from LAPACK inside compiled kernels.
 
 NumPy's and SciPy's wrappers cost more than the decomposition of a 12×12 matrix; calling
-SciPy's Cython LAPACK entry point from Numba removes that overhead and lets the simulator read
-Γ's conditioning inside its per-step kernel. The results are bit-identical to
-``scipy.linalg.lapack.dgesdd(A, compute_uv=0)``.
+SciPy's Cython LAPACK entry points from Numba removes that overhead and lets the simulator read
+Γ's conditioning inside its per-step kernel. :func:`singular_values` is LAPACK's dgesdd without
+vectors, bit-identical to ``scipy.linalg.lapack.dgesdd(A, compute_uv=0)``; the analysis'
+batched :func:`svd_right` is dgesvd computing Vᵀ but not U, which it does not need.
 """
 
 from __future__ import annotations
@@ -20,13 +21,18 @@ from pipeline.sim.jit import jit
 llvm.add_symbol("pipeline_dgesdd",
                 get_cython_function_address("scipy.linalg.cython_lapack", "dgesdd"))
 _dgesdd = types.ExternalFunction("pipeline_dgesdd", types.void(*([types.voidptr] * 14)))
+llvm.add_symbol("pipeline_dgesvd",
+                get_cython_function_address("scipy.linalg.cython_lapack", "dgesvd"))
+_dgesvd = types.ExternalFunction("pipeline_dgesvd", types.void(*([types.voidptr] * 14)))
 
 
 @jit
 def singular_values(A: np.ndarray) -> np.ndarray:
-    """σ of A, descending; NaN everywhere if LAPACK reports failure (non-finite input)."""
+    """σ of A, descending; NaN everywhere if A is not finite or LAPACK reports failure."""
     m, n = A.shape
     k = min(m, n)
+    if not np.all(np.isfinite(A)):  # LAPACK's QR sweeps can loop forever on NaN
+        return np.full(k, np.nan)
     a = np.ascontiguousarray(A.T)  # LAPACK is column-major: this is A's Fortran layout
     s = np.empty(k)
     jobz = np.array([ord("N")], dtype=np.uint8)
@@ -43,3 +49,50 @@ def singular_values(A: np.ndarray) -> np.ndarray:
     if info[0] != 0:
         s[:] = np.nan
     return s
+
+
+@jit
+def batched_singular_values(A: np.ndarray) -> np.ndarray:
+    """σ of each A[k] (N×m×n → N×min(m, n)), by :func:`singular_values`."""
+    out = np.empty((A.shape[0], min(A.shape[1], A.shape[2])))
+    for k in range(A.shape[0]):
+        out[k] = singular_values(A[k])
+    return out
+
+
+@jit
+def svd_right(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """σ and Vᵀ of each square A[k] = U_k diag(σ_k) V_kᵀ (N×n×n → N×n, N×n×n), U not formed.
+
+    A C-ordered A[k] is A[k]ᵀ to LAPACK, and svd(Aᵀ) = V S Uᵀ: dgesvd with JOBU = 'S' and
+    JOBVT = 'N' on it returns V as its U, in column-major order, which read row-major is Vᵀ.
+    NaN everywhere for a matrix that is not finite or where LAPACK reports failure.
+    """
+    N, n = A.shape[0], A.shape[1]
+    S = np.empty((N, n))
+    Vt = np.empty((N, n, n))
+    a = np.empty((n, n))
+    u = np.empty((n, n))
+    s = np.empty(n)
+    unused = np.empty(1)
+    jobs = np.array([ord("S"), ord("N")], dtype=np.uint8)
+    lwork = 8 * n + 64
+    work = np.empty(lwork)
+    ints = np.array([n, 1, lwork], dtype=np.int32)  # M = N = LDA = LDU, LDVT, LWORK
+    info = np.zeros(1, dtype=np.int32)
+    for k in range(N):
+        if not np.all(np.isfinite(A[k])):  # LAPACK's QR sweeps can loop forever on NaN
+            S[k] = np.nan
+            Vt[k] = np.nan
+            continue
+        a[:] = A[k]
+        _dgesvd(jobs[0:1].ctypes, jobs[1:2].ctypes, ints[0:1].ctypes, ints[0:1].ctypes,
+                a.ctypes, ints[0:1].ctypes, s.ctypes, u.ctypes, ints[0:1].ctypes, unused.ctypes,
+                ints[1:2].ctypes, work.ctypes, ints[2:3].ctypes, info.ctypes)
+        if info[0] != 0:
+            S[k] = np.nan
+            Vt[k] = np.nan
+        else:
+            S[k] = s
+            Vt[k] = u
+    return S, Vt

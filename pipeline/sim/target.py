@@ -70,23 +70,45 @@ class CoverageCounter:
     def __init__(self, target: TargetGeometry, cam: Camera):
         self.target = target
         self.seen = np.zeros(len(target.points), dtype=bool)
-        self.n_seen = 0
-        self._limits = camera_limits(cam)
+        self.count = np.zeros(1, dtype=np.int64)  # how many are seen; an array, updated in place
+        self.limits = np.array(camera_limits(cam))
+
+    @property
+    def n_seen(self) -> int:
+        return int(self.count[0])
 
     def update(self, p_e: np.ndarray, R_te: np.ndarray) -> float:
         """Mark what the camera at (p_e, R_te) sees; the coverage so far (a fraction)."""
-        self.n_seen += mark_visible(self.target.points, self.target.normals, p_e, R_te,
-                                    *self._limits, self.seen)
+        self.count[0] += mark_visible(self.target.points, self.target.normals, p_e, R_te,
+                                      *self.limits, self.seen)
         return self.n_seen / self.seen.size
 
 
 @jit
 def mark_visible(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max, seen):
-    """``seen |= visible_mask(...)`` without the temporary; returns how many were new."""
+    """Mark the points the camera sees in ``seen`` (eq. 18); how many were not seen before.
+
+    Point i, with r = p_i − p_e and (x, y, z) = R_teᵀ r, is seen iff d_min <= z <= d_max,
+    √(x² + y²) <= z tan(fov/2) and −n_i·r >= ‖r‖ cos(max_angle). Points already seen are
+    skipped, and the cheapest test comes first: most points are behind the camera or out of
+    range.
+    """
     new = 0
-    vis = visible_mask(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max)
-    for i in range(vis.size):
-        if vis[i] and not seen[i]:
+    for i in range(points.shape[0]):
+        if seen[i]:
+            continue
+        r0 = points[i, 0] - p_e[0]
+        r1 = points[i, 1] - p_e[1]
+        r2 = points[i, 2] - p_e[2]
+        z = R_te[0, 2] * r0 + R_te[1, 2] * r1 + R_te[2, 2] * r2
+        if not d_min <= z <= d_max:
+            continue
+        x = R_te[0, 0] * r0 + R_te[1, 0] * r1 + R_te[2, 0] * r2
+        y = R_te[0, 1] * r0 + R_te[1, 1] * r1 + R_te[2, 1] * r2
+        if not np.sqrt(x * x + y * y) <= z * tan_half_fov:
+            continue
+        facing = -(normals[i, 0] * r0 + normals[i, 1] * r1 + normals[i, 2] * r2)
+        if facing >= np.sqrt(r0 * r0 + r1 * r1 + r2 * r2) * cos_max:
             seen[i] = True
             new += 1
     return new
@@ -94,21 +116,7 @@ def mark_visible(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max
 
 @jit
 def visible_mask(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max):
-    """Per point: with r = p − p_e and (x, y, z) = R_teᵀ r, seen iff d_min <= z <= d_max,
-    √(x² + y²) <= z tan(fov/2) and −n·r >= ‖r‖ cos(max_angle) (eq. 18). A loop over points:
-    a dozen flops each, no temporaries.
-    """
-    n = points.shape[0]
-    out = np.empty(n, dtype=np.bool_)
-    for i in range(n):
-        r0 = points[i, 0] - p_e[0]
-        r1 = points[i, 1] - p_e[1]
-        r2 = points[i, 2] - p_e[2]
-        x = R_te[0, 0] * r0 + R_te[1, 0] * r1 + R_te[2, 0] * r2
-        y = R_te[0, 1] * r0 + R_te[1, 1] * r1 + R_te[2, 1] * r2
-        z = R_te[0, 2] * r0 + R_te[1, 2] * r1 + R_te[2, 2] * r2
-        facing = -(normals[i, 0] * r0 + normals[i, 1] * r1 + normals[i, 2] * r2)
-        dist = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        out[i] = (d_min <= z <= d_max and np.sqrt(x * x + y * y) <= z * tan_half_fov
-                  and facing >= dist * cos_max)
-    return out
+    """Which points the camera sees (eq. 18; the test of :func:`mark_visible`)."""
+    seen = np.zeros(points.shape[0], dtype=np.bool_)
+    mark_visible(points, normals, p_e, R_te, tan_half_fov, d_min, d_max, cos_max, seen)
+    return seen

@@ -153,6 +153,14 @@ def gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 
 @jit
+def gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass):
+    """out[k] = :func:`gamma_of_placements` (eq. 5): the analysis' rebuild, one step at a time
+    into a preallocated stack, with no array handed back to Python."""
+    out[k] = gamma_of_placements(np.ascontiguousarray(R_tb).copy(), p_b.copy(),
+                                 np.ascontiguousarray(R_te).copy(), p_e.copy(), J_e, M, mass)
+
+
+@jit
 def full_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping, v, dJ_e, Ag, dAg, C):
     """Eqs. 2–9 and 19 in one call: :func:`task_transform`, then Γ̇, M̂, Ĉ and Γ's (σ_min, κ)."""
     (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
