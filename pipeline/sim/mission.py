@@ -15,6 +15,7 @@ and Pinocchio's integrate closes it. :meth:`Mission.step` runs that same code on
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -97,6 +98,7 @@ class Mission:
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self._reference = np.zeros(REFERENCE_SIZE)
+        self._zero_q = np.zeros(self.robot.model.nq)
         q_start = self.robot.start_configuration()
         T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
@@ -146,7 +148,8 @@ class Mission:
                                  coverage.count)
         q_new = pin.integrate(robot.model, state[_Q], state[_DQ])
         state[_Q] = q_new
-        return finite and bool(np.isfinite(q_new).all())
+        # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
+        return finite and math.isfinite(q_new @ self._zero_q)
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,

@@ -89,6 +89,17 @@ class GiordanoRobot:
         self.damping = spec.robot.damped_inverse.damping
         self._zero_12 = np.zeros((self.model.nv, self.model.nv))
         self._zero_12.flags.writeable = False
+        # Pinocchio writes the placements and the centroidal map in place, so views taken once
+        # follow every later call; fetching them per step would cost more than a Pinocchio
+        # routine. A binding that hands out copies instead gets the per-call accessors.
+        views = self._data_views()
+        self._views = None if any(a.flags.owndata for a in views) else views
+
+    def _data_views(self) -> tuple[np.ndarray, ...]:
+        """(R_tb, p_b, R_te, p_e, A_g, Ȧ_g) as Pinocchio's data holds them now."""
+        d, fid = self.data, self.frame_id
+        return (d.oMi[1].rotation, d.oMi[1].translation, d.oMf[fid].rotation,
+                d.oMf[fid].translation, d.Ag, d.dAg)
 
     # -- configurations -------------------------------------------------------------------
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:
@@ -128,9 +139,8 @@ class GiordanoRobot:
             pin.updateFramePlacement(model, data, fid)
             J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
             M = pin.crba(model, data, qk)
-            oMb, oMe = data.oMi[1], data.oMf[fid]
-            tt.gamma_into(out, k, oMb.rotation, oMb.translation, oMe.rotation, oMe.translation,
-                          J_e, M, mass)
+            R_tb, p_b, R_te, p_e, _, _ = self._views or self._data_views()
+            tt.gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass)
         return out
 
     def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -147,9 +157,8 @@ class GiordanoRobot:
         dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
         C = pin.computeCoriolisMatrix(model, data, q, v)
         pin.computeCentroidalMapTimeVariation(model, data, q, v)
-        oMb, oMe = data.oMi[1], data.oMf[fid]
-        return (oMb.rotation, oMb.translation, oMe.rotation, oMe.translation, J_e, dJ_e, M, C,
-                data.Ag, data.dAg)
+        R_tb, p_b, R_te, p_e, Ag, dAg = self._views or self._data_views()
+        return R_tb, p_b, R_te, p_e, J_e, dJ_e, M, C, Ag, dAg
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
         """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.
