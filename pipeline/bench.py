@@ -3,7 +3,9 @@
 See DESIGN §7.
 
 Every figure is measured in this process on the same configurations (those of a nominal run),
-repeated, and reported as median with min and max:
+repeated, and reported as median with min and max. Each repeat times the floor, the simulator
+and the analysis back to back, and the ratios are the median of the per-repeat ratios, so a
+drift of the host's speed between repeats does not enter them:
 
 - ``floor_us``: the Pinocchio calls one step needs (CRBA, Coriolis matrix, joint Jacobians and
   their time variation with the camera frame's Jacobian and its variation, centroidal map and

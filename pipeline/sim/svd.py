@@ -62,7 +62,8 @@ def batched_singular_values(A: np.ndarray) -> np.ndarray:
 
 @jit
 def svd_right(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """σ and Vᵀ of each square A[k] = U_k diag(σ_k) V_kᵀ (N×n×n → N×n, N×n×n), U not formed.
+    """σ and Vᵀ of each square A[k] = U_k diag(σ_k) V_kᵀ (N×n×n → N×n, N×n×n), U not formed:
+    the analysis' per-direction SVD of Γ (eq. 26).
 
     A C-ordered A[k] is A[k]ᵀ to LAPACK, and svd(Aᵀ) = V S Uᵀ: dgesvd with JOBU = 'S' and
     JOBVT = 'N' on it returns V as its U, in column-major order, which read row-major is Vᵀ.
