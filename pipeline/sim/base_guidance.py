@@ -42,15 +42,6 @@ class Reference:
         """The fields flattened in the order of ``REFERENCE_FIELDS``."""
         return np.concatenate([np.ravel(getattr(self, f)) for f, _ in REFERENCE_FIELDS])
 
-    @classmethod
-    def from_vector(cls, r: np.ndarray) -> Reference:
-        """Inverse of :meth:`as_vector`."""
-        out, i = {}, 0
-        for f, n in REFERENCE_FIELDS:
-            out[f] = r[i:i + n].reshape((3, 3) if n == 9 else (3,)).copy()
-            i += n
-        return cls(**out)
-
 
 @jit
 def orbit(tau, phase, radius, omega):

@@ -125,22 +125,24 @@ class GiordanoRobot:
         return self.full_configuration(self.q_bar)
 
     # -- per-state terms ------------------------------------------------------------------
-    def gamma_matrix_at(self, q: np.ndarray) -> np.ndarray:
-        """Γ(q) alone (eq. 5), by the same kernels as :meth:`terms`."""
-        return self.gamma_matrices(q[None])[0]
+    def kinematic_inputs(self, q: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Pinocchio's outputs at q that eqs. 2–6 take: (R_tb, p_b, R_te, p_e, J_e, M), the
+        camera Jacobian in the LOCAL frame. Some are views of Pinocchio's data, valid until
+        its next call."""
+        model, data, fid = self.model, self.data, self.frame_id
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacement(model, data, fid)
+        J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
+        M = pin.crba(model, data, q)
+        R_tb, p_b, R_te, p_e, _, _ = self._views or self._data_views()
+        return R_tb, p_b, R_te, p_e, J_e, M
 
     def gamma_matrices(self, q: np.ndarray) -> np.ndarray:
         """Γ(q_k) for every row of q (N×13 → N×12×12, eq. 5): the analysis' rebuild, by the
         simulator's kernels, so a Γ rebuilt from a logged q is the simulator's to the bit."""
-        model, data, fid, mass = self.model, self.data, self.frame_id, self.mass
-        out = np.empty((len(q), model.nv, model.nv))
+        out = np.empty((len(q), self.model.nv, self.model.nv))
         for k, qk in enumerate(q):
-            pin.computeJointJacobians(model, data, qk)
-            pin.updateFramePlacement(model, data, fid)
-            J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
-            M = pin.crba(model, data, qk)
-            R_tb, p_b, R_te, p_e, _, _ = self._views or self._data_views()
-            tt.gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass)
+            tt.gamma_into(out, k, *self.kinematic_inputs(qk), self.mass)
         return out
 
     def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -169,13 +171,7 @@ class GiordanoRobot:
         if dynamics:
             R_tb, p_b, R_te, p_e, J_e, dJ_e, M, C, Ag, dAg = self.dynamics_inputs(q, v)
         else:
-            model, data, fid = self.model, self.data, self.frame_id
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacement(model, data, fid)
-            J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
-            M = pin.crba(model, data, q)
-            R_tb, p_b = data.oMi[1].rotation, data.oMi[1].translation
-            R_te, p_e = data.oMf[fid].rotation, data.oMf[fid].translation
+            R_tb, p_b, R_te, p_e, J_e, M = self.kinematic_inputs(q)
         # Copies: Pinocchio's arrays view its data, which the next call overwrites.
         R_tb, p_b, R_te, p_e = R_tb.copy(), p_b.copy(), R_te.copy(), p_e.copy()
         m = self.mass

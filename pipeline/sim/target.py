@@ -65,23 +65,14 @@ def camera_limits(cam: Camera) -> tuple[float, float, float, float]:
 
 
 class CoverageCounter:
-    """The set of target points seen so far by a camera (eq. 18), updated in place."""
+    """The target points seen so far by a camera and their count (eq. 18), as the step kernel
+    updates them in place (:func:`mark_visible`)."""
 
     def __init__(self, target: TargetGeometry, cam: Camera):
         self.target = target
         self.seen = np.zeros(len(target.points), dtype=bool)
         self.count = np.zeros(1, dtype=np.int64)  # how many are seen; an array, updated in place
         self.limits = np.array(camera_limits(cam))
-
-    @property
-    def n_seen(self) -> int:
-        return int(self.count[0])
-
-    def update(self, p_e: np.ndarray, R_te: np.ndarray) -> float:
-        """Mark what the camera at (p_e, R_te) sees; the coverage so far (a fraction)."""
-        self.count[0] += mark_visible(self.target.points, self.target.normals, p_e, R_te,
-                                      *self.limits, self.seen)
-        return self.n_seen / self.seen.size
 
 
 @jit
