@@ -22,6 +22,6 @@ class CheckFailed(PipelineError):
 
 
 class RunFailed(PipelineError):
-    """A mission diverged; its log is written and marked failed (exit 1)."""
+    """A mission failed or diverged; its log is written and marked so (exit 1)."""
 
     exit_code = 1

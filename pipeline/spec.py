@@ -21,6 +21,7 @@ from pipeline.errors import SpecError
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 SPECS_DIR = PROJECT_ROOT / "specs"
+ROBOT_SUFFIXES = (".urdf", ".xml", ".mjcf")  # URDF, or MJCF (MuJoCo's XML)
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -42,13 +43,17 @@ class DampedInverse(_Block):
 
 
 class RobotSpec(_Block):
-    urdf: str = "robots/servicer_ur3.urdf"
+    """The robot: a URDF or MJCF file (relative to ``specs/``), its camera frame, q̄ and the
+    damped inverse. ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body
+    on the free joint (the bus and all that is fixed to it) about its own CoM, its mass and
+    CoM unchanged: the knob of the bus-inertia sweep."""
+
+    file: str = "robots/seed_ur3_box.xml"
     camera_frame: str = "camera"
-    # Nominal arm posture q̄ (rad): camera boresight along the bus +z axis, elbow bent 1 rad
-    # so the arm keeps reach margin (σ_min(Γ) ≈ 0.08); closer to straight, a few cm of CoM
-    # error already drive J⊕ singular (see the note on issue 3).
-    q_bar: list[Finite] = Field(default=[0.0, -1.6, 1.0, -0.95, 1.5708, 0.0])
+    # The seed robot's inspection reach (specs/nominal.yaml says why).
+    q_bar: list[Finite] = Field(default=[0.0, -0.367, -1.763, -0.993, -5.95, 0.0])
     damped_inverse: DampedInverse = DampedInverse()
+    bus_inertia_scale: Positive = 1.0
 
     @field_validator("q_bar")
     @classmethod
@@ -104,8 +109,8 @@ class Gains(_Block):
 class ComGains(_Block):
     """CoM loop gains (eq. 12), per unit mass (s⁻², s⁻¹, s⁻³) and the integral bound (m·s)."""
 
-    K: NonNegative = 0.01
-    D: Positive = 0.2
+    K: NonNegative = 0.638
+    D: Positive = 1.786
     Ki: NonNegative = 0.0
     i_max: NonNegative = 1.0
 
@@ -120,16 +125,17 @@ class BaseBlock(_Block):
 
 
 class Limits(_Block):
-    """Rate and acceleration saturations (rad/s, m/s, and per second) and the clip v_max."""
+    """Rate and acceleration saturations (rad/s, m/s, and per second) and the clip v_max.
+    Defaults: the seed robot's (specs/nominal.yaml cites them)."""
 
     omega_b_rate: Positive = 0.5
-    omega_b_acc: Positive = 2.0
+    omega_b_acc: Positive = 10.00466
     nu_e_lin_rate: Positive = 0.5
     nu_e_lin_acc: Positive = 5.0
     nu_e_ang_rate: Positive = 1.0
     nu_e_ang_acc: Positive = 10.0
-    v_c_rate: Positive = 0.2
-    v_c_acc: Positive = 0.05
+    v_c_rate: Positive = 0.75
+    v_c_acc: Positive = 1.2755
     v_max: Positive = 50.0
 
 
@@ -193,7 +199,7 @@ class Spec(_Block):
 
     @property
     def robot_path(self) -> Path:
-        return SPECS_DIR / self.robot.urdf
+        return SPECS_DIR / self.robot.file
 
     def content(self) -> dict[str, Any]:
         """The spec's content: everything but its name."""
@@ -301,11 +307,14 @@ def build_spec(name: str, data: dict, source: Path | str) -> Spec:
 
 def _check_robot(spec: Spec, source: Path | str) -> None:
     root = SPECS_DIR.resolve()
-    p = (SPECS_DIR / spec.robot.urdf).resolve()
+    p = (SPECS_DIR / spec.robot.file).resolve()
     if root not in p.parents:
-        raise SpecError(f"{source}: field robot.urdf: {spec.robot.urdf!r} escapes specs/")
+        raise SpecError(f"{source}: field robot.file: {spec.robot.file!r} escapes specs/")
     if not p.is_file():
-        raise SpecError(f"{source}: field robot.urdf: robot file {p} not found")
+        raise SpecError(f"{source}: field robot.file: robot file {p} not found")
+    if p.suffix.lower() not in ROBOT_SUFFIXES:
+        raise SpecError(f"{source}: field robot.file: {spec.robot.file!r} is neither URDF "
+                        f"nor MJCF (suffix one of {', '.join(ROBOT_SUFFIXES)})")
 
 
 def load_spec(spec: str | Path) -> Spec:

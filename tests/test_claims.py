@@ -109,8 +109,8 @@ def test_provenance_and_threshold_references(tmp_path):
         {"id": "P1", "statement": "same dt", "expect": "hold", "checks": [
             {"metric": "nominal:spec.mission.dt", "op": "eq",
              "threshold": {"metric": "nominal:spec.mission.dt"}},
-            {"metric": "nominal:log.camera_roll.ripple", "op": "gt", "threshold": 0.01},
-            {"metric": "nominal:log.omega_b.ripple", "op": "lt", "threshold": 1e-3}]},
+            {"metric": "nominal:log.omega_b.ripple", "op": "gt", "threshold": 0.01},
+            {"metric": "nominal:log.camera_roll.ripple", "op": "lt", "threshold": 1e-3}]},
     ])
     r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
     assert r.returncode == 0, r.stderr
@@ -171,13 +171,111 @@ def test_the_registers_state_the_issue_claims_with_their_thresholds(name):
     assert all(k.op in OPERATORS for c in cf.claims for k in c.checks)
 
 
+# Issue 11: the seed note's rows, with the tolerances the issue fixed before measuring.
+NOTE_TOLERANCES = [
+    ("C17", "nominal:theory.dt_mu_max", "note:dt_mu_max.nominal", 0.02),
+    ("C17", "dt010:theory.dt_mu_max", "note:dt_mu_max.dt010", 0.02),
+    ("C18", "nominal:theory.dt_star", "note:dt_star.nominal", 0.02),
+    ("C20", "nominal:theory.note_order.eig_dominant.real", "note:eig_dominant.nominal", 0.03),
+    ("C21", "nominal:dominant.sigma", "note:ripple_sigma.nominal", 0.15),
+    ("C22", "nominal:velocity_jump.median", "note:velocity_jump.nominal", 0.25),
+    ("C23", "dt010:velocity_jump.median", "note:velocity_jump.dt010", 0.25),
+]
+
+
+@pytest.mark.parametrize("name", ["claims.yaml", "claims_ci.yaml"])
+def test_the_registers_state_the_seed_note_rows_with_the_issue_tolerances(name):
+    cf = load_claims(SPECS_DIR / name)
+    by_id = {c.id: c for c in cf.claims}
+    for cid, metric, note, tol in NOTE_TOLERANCES:
+        assert any(k.metric == metric and k.op == "close" and k.threshold_metric == note
+                   and k.rel_tol == tol for k in by_id[cid].checks), (cid, metric)
+    lag = {(k.metric, k.op, k.threshold) for k in by_id["C24"].checks}
+    assert lag == {("nominal:dominant.lag1", "lt", -0.9), ("dt010:dominant.lag1", "gt", 0.99),
+                   ("imex:dominant.lag1", "gt", 0.99)}
+    assert by_id["C15"].expect == "hold"
+
+
 def test_ci_register_is_the_same_claims_on_short_missions():
     full, ci = load_claims(SPECS_DIR / "claims.yaml"), load_claims(SPECS_DIR / "claims_ci.yaml")
     assert full.claims == ci.claims
     assert {n: r.spec for n, r in ci.runs.items()} == {
         "nominal": "short_nominal", "dt010": "short_omega_ripple_dt010",
-        "imex": "short_omega_ripple_imex"}
+        "imex": "short_omega_ripple_imex", "reach": "short_omega_ripple_reach",
+        "unbounded": "omega_ripple_unbounded", "servicer": "short_servicer_nominal",
+        "servicer_dt010": "short_servicer_dt010", "servicer_imex": "short_servicer_imex"}
+    assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
+                                                        for n, r in full.runs.items()}
     assert {n: r.against for n, r in ci.runs.items()} == {n: r.against
                                                         for n, r in full.runs.items()}
     assert ci.sweeps["dt"].spec == "short_nominal" and full.sweeps["dt"].spec == "nominal"
     assert ci.sweeps["dt"].set[0] == full.sweeps["dt"].set[0]  # the same dt grid
+    assert ci.sweeps["inertia"].set[0] == full.sweeps["inertia"].set[0]
+    assert ci.sweeps["inertia"].model_dump(include={"key", "lag", "predicted"}) == \
+        full.sweeps["inertia"].model_dump(include={"key", "lag", "predicted"})
+
+
+# -- issue 11: the `close` operator, the seed note as a metric source, expected divergence -----
+
+@pytest.mark.parametrize("value,threshold,tol,expected", [
+    (3.84, 3.84, 0.02, True), (3.9, 3.84, 0.02, True),  # 1.6 % off
+    (3.95, 3.84, 0.02, False),  # 2.9 % off
+    (-2.81, -2.81, 0.03, True), (-2.926, -2.81, 0.03, False),  # the simulator's order: 4.1 %
+    (float("nan"), 1.0, 0.1, False), (1.0, float("nan"), 0.1, False),
+])
+def test_close_is_relative_to_the_threshold_and_nan_never_holds(value, threshold, tol, expected):
+    assert compare_values("close", value, threshold, tol) is expected
+
+
+def _note_file(tmp_path: Path) -> Path:
+    p = tmp_path / "note.yaml"
+    p.write_text(yaml.safe_dump({
+        "note": "a test note", "runs": {"nominal": "a", "dt010": "b"},
+        "rows": [{"key": "lag", "row": "1. lag-1", "nominal": -0.92, "dt010": None,
+                  "ours": "dominant.lag1"}]}))
+    return p
+
+
+@pytest.mark.parametrize("check,needle", [
+    ({"metric": "nominal:dominant.lag1", "op": "close", "threshold": 1}, "rel_tol goes with"),
+    ({"metric": "nominal:dominant.lag1", "op": "lt", "threshold": 1, "rel_tol": 0.1},
+     "rel_tol goes with"),
+    ({"metric": "nominal:dominant.lag1", "op": "close", "rel_tol": 0.1,
+      "threshold": {"metric": "note:nope.nominal"}}, "no row 'nope'"),
+    ({"metric": "nominal:dominant.lag1", "op": "close", "rel_tol": 0.1,
+      "threshold": {"metric": "note:lag.dt010"}}, "publishes no dt010 value"),
+    ({"metric": "nominal:dominant.lag1", "op": "close", "rel_tol": 0.1,
+      "threshold": {"metric": "note:lag.other"}}, "no column 'other'"),
+])
+def test_bad_note_references_are_refused_before_anything_runs(tmp_path, check, needle):
+    path = claims_file(tmp_path, [{"id": "N1", "statement": "s", "expect": "hold",
+                                   "checks": [check]}])
+    data = yaml.safe_load(path.read_text())
+    data["note"] = str(_note_file(tmp_path))
+    path.write_text(yaml.safe_dump(data, allow_unicode=True))
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        load_claims(path)
+
+
+def test_a_note_metric_without_a_note_file_is_refused(tmp_path):
+    path = claims_file(tmp_path, [claim("N2", "note:lag.nominal", "lt", 0)])
+    with pytest.raises(SpecError, match="needs a `note:` file"):
+        load_claims(path)
+
+
+def test_the_shipped_note_publishes_the_issue_values():
+    """The seed note's numbers as issue 11 lists them, read from specs/seed_note.yaml."""
+    from pipeline.reports.seed_note import load_note
+
+    note = load_note(SPECS_DIR / "seed_note.yaml")
+    expected = {("dominant_lag1", "nominal"): -0.92, ("dominant_lag1", "dt010"): 1.0,
+                ("dt_mu_max", "nominal"): 3.84, ("dt_mu_max", "dt010"): 1.28,
+                ("eig_dominant", "nominal"): -2.81, ("eig_dominant", "dt010"): 1.0,
+                ("velocity_jump", "nominal"): 0.409, ("velocity_jump", "dt010"): 0.0009,
+                ("provenance", "nominal"): 3.8e-16, ("provenance", "dt010"): 1.9e-16,
+                ("dt_star", "nominal"): 0.0156, ("ripple_sigma", "nominal"): 0.77,
+                ("s_min_G", "nominal"): 0.032}
+    for (key, col), v in expected.items():
+        assert note.value(key, col) == v, (key, col)
+    with pytest.raises(SpecError, match="publishes no"):
+        note.value("abs_cos", "nominal")  # the note's alignment row has no number

@@ -3,8 +3,8 @@
 Independent references: positions and attitudes from a *separate* Pinocchio data object
 (``centerOfMass``, ``framesForwardKinematics``: no Jacobian, CRBA or centroidal map involved),
 differentiated by central differences along ``pin.integrate``; the kinetic energy from
-``pin.computeKineticEnergy`` (RNEA-style pass, not CRBA); the total mass summed from the URDF
-text; matrix inverses from ``np.linalg.inv``; SVDs from ``np.linalg.svd``.
+``pin.computeKineticEnergy`` (RNEA-style pass, not CRBA); the total mass summed from the robot
+file's text (URDF or MJCF); matrix inverses from ``np.linalg.inv``; SVDs from ``np.linalg.svd``.
 
 Finite-difference tolerances. Central differences of a smooth f along q(t) = q ⊕ t v have
 truncation error h² |f'''| / 6 and roundoff about ε |f| / h (ε = 2.2e-16). With h = 1e-5,
@@ -23,8 +23,8 @@ import pinocchio as pin
 import pytest
 from conftest import SEEDS, random_state
 
-from pipeline.sim.robot import damped_pinv
-from pipeline.spec import SPECS_DIR
+from pipeline.sim.robot import GiordanoRobot, damped_pinv
+from pipeline.spec import load_spec
 
 H = 1e-5
 FD_ATOL = 1e-8
@@ -54,8 +54,20 @@ def _shifted(robot, q, v, h=H):
     return pin.integrate(robot.model, q, h * v), pin.integrate(robot.model, q, -h * v)
 
 
-def _urdf_mass() -> float:
-    root = ET.parse(SPECS_DIR / "robots" / "servicer_ur3.urdf").getroot()
+# Both shipped robots: the seed (MJCF, a 5 kg box bus) and the servicer (URDF, 150 kg).
+ROBOT_SPECS = {"nominal": 17.18, "servicer_nominal": 160.13}  # total mass, kg, by hand
+
+
+@pytest.fixture(scope="module", params=sorted(ROBOT_SPECS))
+def robot(request) -> GiordanoRobot:
+    return GiordanoRobot(load_spec(request.param))
+
+
+def _file_mass(robot) -> float:
+    """The masses written in the robot file, summed from its text (URDF or MJCF)."""
+    root = ET.parse(robot.spec.robot_path).getroot()
+    if root.tag == "mujoco":
+        return sum(float(e.get("mass")) for e in root.iter("inertial"))
     return sum(float(m.get("value")) for m in root.iter("mass"))
 
 
@@ -190,9 +202,9 @@ def test_terms_own_their_arrays(robot, rng, dynamics):
 
 # -- transformed dynamics ----------------------------------------------------------------------
 
-def test_total_mass_is_the_urdf_sum(robot):
-    assert robot.mass == pytest.approx(_urdf_mass(), rel=1e-12)
-    assert robot.mass == pytest.approx(160.13, rel=1e-12)
+def test_total_mass_is_the_file_sum(robot):
+    assert robot.mass == pytest.approx(_file_mass(robot), rel=1e-12)
+    assert robot.mass == pytest.approx(ROBOT_SPECS[robot.spec.name], rel=1e-12)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -200,7 +212,7 @@ def test_M_hat_block_structure(robot, seed):
     rng = np.random.default_rng(seed)
     q, v = random_state(robot, rng)
     T = robot.terms(q, v)
-    m = _urdf_mass()
+    m = _file_mass(robot)
     scale = np.abs(T.M_hat).max()
     np.testing.assert_allclose(T.M_hat[:3, :3], m * np.eye(3), atol=1e-10 * scale)
     np.testing.assert_allclose(T.M_hat[:3, 3:], 0.0, atol=1e-10 * scale)
@@ -222,7 +234,7 @@ def test_kinetic_energy_is_invariant(robot, seed):
     assert 0.5 * nu @ T.M_hat @ nu == pytest.approx(ke, rel=1e-10)
     # Split: CoM translation carries ½ m |v_c|², the reduced part the rest.
     assert 0.5 * nu[3:] @ T.reduced_inertia @ nu[3:] == pytest.approx(
-        ke - 0.5 * _urdf_mass() * nu[:3] @ nu[:3], rel=1e-9)
+        ke - 0.5 * _file_mass(robot) * nu[:3] @ nu[:3], rel=1e-9)
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from conftest import SEEDS
 
+from pipeline.errors import SpecError
 from pipeline.sim.base_controller import conditioning_scale
 from pipeline.sim.mission import Mission
 from pipeline.sim.sampling import Sampling, scale_by_svd, sigma_min, sigma_min_and_cond
@@ -68,6 +69,28 @@ def test_method_and_conditioning_scale_use_the_same_ramp(rng):
         assert samp.scale_by_svd(sigma, ramp) == pytest.approx(_ramp(sigma, 0.005, 0.03, 0.2))
         assert conditioning_scale(sigma, ctrl.controller) == pytest.approx(
             _ramp(sigma, 0.005, 0.03, 0.2))
+
+
+def test_opts_as_the_seed_note_writes_them(rng):
+    """``scale_by_svd(σ, opts)`` with opts a mapping {low, high, floor}, as the note's
+    pseudocode writes it, gives the typed block's ramp."""
+    samp = Sampling(ConfigSampling())
+    for sigma in rng.uniform(0, 0.1, 50):
+        assert samp.scale_by_svd(sigma, {"low": 0.005, "high": 0.03, "floor": 0.2}) == \
+            pytest.approx(_ramp(sigma, 0.005, 0.03, 0.2))
+    assert samp.scale_by_svd(0.0, {"low": 0, "high": 1, "floor": 1}) == 1.0  # ints are fine
+
+
+@pytest.mark.parametrize("opts,needle", [
+    ({"low": 0.01, "high": 0.05}, "key 'floor' missing"),
+    ({"low": 0.05, "high": 0.01, "floor": 0.3}, "must be below high"),
+    ({"low": 0.01, "high": 0.05, "floor": 0.3, "gain": 1}, "gain: unknown key"),
+    ({"low": 0.01, "high": 0.05, "floor": float("nan")}, "floor"),
+    ({"low": 0.01, "high": "x", "floor": 0.3}, "high"),
+])
+def test_bad_opts_mappings_are_spec_errors(opts, needle):
+    with pytest.raises(SpecError, match=needle):
+        Sampling(ConfigSampling()).scale_by_svd(0.02, opts)
 
 
 # -- sigma_min, sigma_min_and_cond -------------------------------------------------------------

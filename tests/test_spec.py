@@ -43,10 +43,14 @@ BAD_SPECS: dict[str, tuple[dict[str, str], str, tuple[str, ...]]] = {
                            "s.yaml", ("controller.integrator",)),
     "q_bar_length": ({"s.yaml": "extends: nominal\nrobot: {q_bar: [0, 1, 2]}\n"},
                      "s.yaml", ("robot.q_bar",)),
-    "missing_robot": ({"s.yaml": "extends: nominal\nrobot: {urdf: robots/nope.urdf}\n"},
-                      "s.yaml", ("robot.urdf", "nope.urdf")),
-    "robot_escapes": ({"s.yaml": "extends: nominal\nrobot: {urdf: ../pyproject.toml}\n"},
-                      "s.yaml", ("robot.urdf", "escapes")),
+    "missing_robot": ({"s.yaml": "extends: nominal\nrobot: {file: robots/nope.urdf}\n"},
+                      "s.yaml", ("robot.file", "nope.urdf")),
+    "robot_escapes": ({"s.yaml": "extends: nominal\nrobot: {file: ../pyproject.toml}\n"},
+                      "s.yaml", ("robot.file", "escapes")),
+    "robot_not_urdf_or_mjcf": ({"s.yaml": "extends: nominal\nrobot: {file: nominal.yaml}\n"},
+                               "s.yaml", ("robot.file", "neither URDF nor MJCF")),
+    "old_urdf_key": ({"s.yaml": "extends: nominal\nrobot: {urdf: robots/x.urdf}\n"},
+                     "s.yaml", ("robot.urdf", "unknown key")),
     "broken_yaml": ({"broken.yaml": "extends: nominal\nmission: {dt: [0.03\n"},
                     "broken.yaml", ("broken.yaml", "YAML")),
     "not_a_mapping": ({"s.yaml": "- 1\n- 2\n"}, "s.yaml", ("s.yaml", "mapping")),
@@ -182,7 +186,7 @@ def test_canonical_hash_of_plain_mappings():
 
 def test_hash_int_and_float_spelling_agree():
     base = load_spec("short_nominal")
-    assert with_overrides(base, {"mission.duration": 12}).spec_hash == base.spec_hash
+    assert with_overrides(base, {"mission.duration": 30}).spec_hash == base.spec_hash
     assert with_overrides(base, {"controller.gains.bus.K": 2}).spec_hash == base.spec_hash
 
 
@@ -198,7 +202,8 @@ def test_hash_changes_with_content(key, value):
 
 def test_hash_is_distinct_across_shipped_specs():
     # Every mission spec shipped loads and is distinct (claims registers share the folder).
-    names = [p.stem for p in SPECS_DIR.glob("*.yaml") if not p.stem.startswith("claims")]
+    names = [p.stem for p in SPECS_DIR.glob("*.yaml")
+             if not p.stem.startswith("claims") and p.stem != "seed_note"]
     assert {"nominal", "omega_ripple_dt010", "omega_ripple_imex", *SHORT_SPECS} <= set(names)
     hashes = {load_spec(n).spec_hash for n in names}
     assert len(hashes) == len(names)
@@ -228,16 +233,16 @@ def test_extends_merges_recursively(tmp_path):
 def test_shipped_short_specs_merge_their_chain():
     imex = load_spec("short_omega_ripple_imex")
     assert imex.controller.integrator == "imex"
-    assert (imex.mission.dt, imex.mission.duration) == (0.03, 12.0)
+    assert (imex.mission.dt, imex.mission.duration) == (0.03, 30.0)
     dt010 = load_spec("short_omega_ripple_dt010")
     assert (dt010.mission.dt, dt010.mission.duration, dt010.controller.integrator) == (
-        0.01, 12.0, "explicit")
-    assert dt010.n_steps == 1200 and imex.n_steps == 400
+        0.01, 30.0, "explicit")
+    assert dt010.n_steps == 3000 and imex.n_steps == 1000
     # Only what the chain changes differs from nominal.
     nominal = load_spec("nominal").content()
     c = imex.content()
     assert c["controller"].pop("integrator") == "imex"
-    assert c["mission"].pop("duration") == 12.0
+    assert c["mission"].pop("duration") == 30.0
     nominal["controller"].pop("integrator")
     nominal["mission"].pop("duration")
     assert c == nominal

@@ -8,14 +8,19 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.analysis.stages import analyze_log, compare
+from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text, write_table
 
 
 def write_analysis(record: dict, out_dir: Path) -> Path:
     """Write ``out_dir/<spec name>/analysis.json`` and ``directions.parquet`` atomically."""
     folder = Path(out_dir) / record["spec_name"]
-    table = {k: np.array([d[k] for d in record["directions"]]) for k in record["directions"][0]}
-    write_table(folder / "directions.parquet", table, {"pipeline.log": record["log"]})
+    if record.get("directions"):
+        table = {k: np.array([d[k] for d in record["directions"]])
+                 for k in record["directions"][0]}
+        write_table(folder / "directions.parquet", table, {"pipeline.log": record["log"]})
+    else:  # a diverged log has no per-direction stage: no stale table of an older run
+        (folder / "directions.parquet").unlink(missing_ok=True)
     path = folder / "analysis.json"
     atomic_write_text(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
     return path
@@ -24,6 +29,17 @@ def write_analysis(record: dict, out_dir: Path) -> Path:
 def analyze_command(log: Path, against: Path | None, out: Path,
                     window_start: float | None = None) -> int:
     record = analyze_log(log, window_start)
+    if record.get("status") == "diverged":
+        if against is not None:
+            raise LogError(f"{log}: a diverged log is not compared (--against): only its "
+                           f"divergence stage runs")
+        path = write_analysis(record, out)
+        g = record["divergence"]
+        print(f"{record['spec_name']}: {record['note']}; ω_b grows by {g['growth_factor']:+.4g} "
+              f"per step over steps {g['fit_steps'][0]}–{g['fit_steps'][1]}, Φ predicts "
+              f"{g['predicted']:+.4g} (simulator's order; {g['predicted_note_order']:+.4g} "
+              f"under the note's) -> {path}")
+        return 0
     if against is not None:
         record["comparison"] = compare(record, analyze_log(against, window_start))
     path = write_analysis(record, out)

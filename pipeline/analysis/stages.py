@@ -7,7 +7,7 @@ step, the step of the window where the logged s_min_G is smallest (closest to si
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.svd import batched_singular_values
 from pipeline.spec import Spec, SpecError, build_spec
 
-REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "x_tilde", "dt_mu_max",
+REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", *LIMIT_FLAGS]
 PROVENANCE_TOL = 1e-10  # same code on the same q: equal up to LAPACK's last bits
 
@@ -51,9 +51,19 @@ def choose_window(n: int, dt: float, window_start: float | None) -> Window:
     return Window(start, n, f"from {window_start:g} s to the end")
 
 
+def require_provenance(path, prov: dict) -> None:
+    """CheckFailed unless σ_min of the rebuilt Γ matches the logged s_min_G on every step."""
+    if prov["max_abs_s_min_G"] > PROVENANCE_TOL:
+        raise CheckFailed(f"{path}: provenance: rebuilt σ_min(Γ) differs from logged s_min_G "
+                          f"by {prov['max_abs_s_min_G']:.3e} at step {prov['worst_step']} "
+                          f"(tolerance {PROVENANCE_TOL:g})")
+
+
 def analyze_log(path, window_start: float | None = None, check: bool = True) -> dict:
     """All single-log stages; returns the analysis record (the content of analysis.json)."""
     meta = read_meta(path)
+    if meta.status == "diverged":
+        return divergence_record(path, meta)
     if meta.status != "complete":
         raise LogError(f"{path}: log marked {meta.status} at step {meta.failed_step}: "
                        f"{meta.error}")
@@ -66,10 +76,8 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
 
     # Stages 1 and 2: Γ rebuilt at every step, velocity projected in the window.
     prov, y, sigma = rebuild_and_project(robot, path, win)
-    if check and prov["max_abs_s_min_G"] > PROVENANCE_TOL:
-        raise CheckFailed(f"{path}: provenance: rebuilt σ_min(Γ) differs from logged s_min_G "
-                          f"by {prov['max_abs_s_min_G']:.3e} at step {prov['worst_step']} "
-                          f"(tolerance {PROVENANCE_TOL:g})")
+    if check:
+        require_provenance(path, prov)
 
     # Stage 3: per-direction statistics and the dominant direction.
     lag1 = signals.lag1_autocorrelation(y)
@@ -82,10 +90,12 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     ]
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
-    cols = read_columns(path, [c for c in REQUIRED if c not in ("q", "x_tilde", "kappa_G")],
+    cols = read_columns(path, [c for c in REQUIRED
+                               if c not in ("q", "x_tilde", "kappa_G", "s_min_J")],
                         win.start, win.stop)
     rep = win.start + int(np.argmin(cols["s_min_G"]))
     th = theory_at_step(robot, spec, path, rep)
+    card = robot.card(th["q"])
 
     # Stages 5 and 6: alignment of theory and data directions, per-step velocity jump.
     data_dir = signals.dominant_step_direction(cols["v"])
@@ -105,8 +115,74 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
                       "theory_direction": th["direction"].tolist(),
                       "data_direction": data_dir.tolist()},
         "velocity_jump": {"median": float(np.median(jumps)), "max": float(np.max(jumps))},
-        "bus_rate": bus_rate_statistics(cols["v"][:, 3:6]),
+        "bus_rate": bus_rate_statistics(cols["v"][:, 3:6], dt,
+                                        spec.controller.limits.omega_b_acc),
         "metrics": mission_metrics(cols),
+        "robot": asdict(card),
+        # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
+        "bus_mode": {"dt_mu_bus": dt * card.mu_bus, "critical_I_zz": dt * card.D_b / 2},
+        "mu_max_log": mu_max_along(path, dt, card.mu_bus, robot.floor),
+    }
+
+
+GROWTH_FLOOR = 1e-3  # rad/s: a step of ω_b above the smooth motion's (~1e-5) and rounding
+
+
+def divergence_record(path, meta) -> dict:
+    """The divergence stage, the only one a ``diverged`` log gets (eqs. 22, 23): the growth
+    of ω_b per step before the v_max clip, against Φ's dominant eigenvalue.
+
+    The log is read up to its divergence step. x_k is ω_b along its direction of most
+    step-to-step energy and d_k = x_{k+1} − x_k. The fit covers the steps with |d_k| at or
+    above ``GROWTH_FLOOR`` whose update no clip has touched (before the first ``sat_v_max``);
+    the measured factor is exp(slope) of log|d_k| by least squares, negative when d_k
+    alternates in sign. Φ (both update orders) is evaluated at the fit's first step.
+    """
+    spec = spec_of_log(path, meta)
+    require_columns(path, REQUIRED)
+    n = num_rows(path)
+    robot = GiordanoRobot(spec)
+    prov, _, _ = rebuild_and_project(robot, path, Window(0, n, "the whole diverged log"))
+    require_provenance(path, prov)
+    cols = read_columns(path, ["v_breve", *LIMIT_FLAGS])
+    bound = np.zeros(n, dtype=bool)
+    for f in LIMIT_FLAGS:
+        bound |= cols[f]
+    first = int(np.argmax(bound)) if bound.any() else n - 1
+    w_b = cols["v_breve"][: first + 1, 0:3]
+    direction = signals.dominant_step_direction(w_b)
+    d = np.diff(w_b @ direction)
+    fit = np.flatnonzero(np.abs(d) >= GROWTH_FLOOR)
+    if fit.size < 3 or np.any(np.diff(fit) != 1):
+        raise LogError(f"{path}: diverged log without 3 consecutive steps of ω_b growing above "
+                       f"{GROWTH_FLOOR:g} rad/s before a limit bound (step {first}): no growth "
+                       f"factor to measure")
+    k = fit.astype(float)
+    slope = np.polyfit(k, np.log(np.abs(d[fit])), 1)[0]
+    alternating = bool(np.all(np.sign(d[fit][1:]) != np.sign(d[fit][:-1])))
+    factor = float(np.exp(slope) * (-1.0 if alternating else 1.0))
+    th = theory_at_step(robot, spec, path, int(fit[0]))
+    rec = th["record"]
+    sim = rec["eig_dominant"]["real"]
+    note = rec["note_order"]["eig_dominant"]["real"]
+    return {
+        "spec_name": spec.name, "log": str(path), "spec_hash": meta.spec_hash,
+        "code_version": meta.code_version, "integrator": spec.controller.integrator,
+        "dt": spec.mission.dt, "n_steps": n, "status": "diverged",
+        "diverged_step": meta.failed_step, "error": meta.error,
+        "note": f"a diverged log, read up to its divergence step {meta.failed_step}: only "
+                f"the divergence stage runs on it",
+        "provenance": prov,
+        "divergence": {
+            "rule": "ω_b along its dominant step direction; |Δx| ≥ "
+                    f"{GROWTH_FLOOR:g} rad/s before the first limit flag; log-linear fit",
+            "direction": direction.tolist(), "first_limit_step": first,
+            "fit_steps": [int(fit[0]), int(fit[-1]) + 1], "alternating": alternating,
+            "growth_factor": factor, "predicted": sim, "predicted_note_order": note,
+            "ratio": factor / sim, "ratio_note_order": factor / note,
+        },
+        "theory": rec,
+        "robot": asdict(robot.card(th["q"])),
     }
 
 
@@ -166,6 +242,9 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
     maps = {i: theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, i))
             for i in ("explicit", "imex")}
     own = maps[integ]
+    # The same integrator under the note's fully explicit update order (eq. 22): the order
+    # the seed note's published eigenvalue matches; the simulator does not run it.
+    note_map = theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, integ, "note"))
     e = own.dominant_vector[9:]
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
@@ -179,6 +258,11 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
         "rho_modes": theory.amplification(dt, mu, integ).tolist(),
         "eig_dominant": {"real": own.dominant.real, "imag": own.dominant.imag},
         "spectral_radius": own.spectral_radius,
+        "update_order": "simulator: x̃ advances with the updated velocity e⁺ (eq. 22)",
+        "note_order": {"rule": "note: x̃ advances with the old velocity e (fully explicit)",
+                       "eig_dominant": {"real": note_map.dominant.real,
+                                        "imag": note_map.dominant.imag},
+                       "spectral_radius": note_map.spectral_radius},
         "maps": {i: {"eig_dominant": {"real": m.dominant.real, "imag": m.dominant.imag},
                      "spectral_radius": m.spectral_radius,
                      "eigenvalues": {"real": m.eigenvalues.real.tolist(),
@@ -188,20 +272,40 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
         "M_breve": M_b.tolist(), "D_breve": D.tolist(), "K_breve": K.tolist(),
         "J_x": J_x.tolist(), "K_x": K_x.tolist(),
     }
-    return {"record": record, "direction": direction}
+    return {"record": record, "direction": direction, "q": row["q"][0]}
 
 
-def bus_rate_statistics(w_b: np.ndarray) -> dict:
-    """The bus angular rate ω_b alone: lag-1 of its dominant step-to-step component (eq. 25).
+def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> dict:
+    """The bus angular rate ω_b alone: lag-1 of its dominant step-to-step component (eq. 25),
+    and its step ‖ω_b,k+1 − ω_b,k‖ against the acceleration saturation's dt·a_max (eq. 16).
 
     The component is ω_b projected on its direction of most step-to-step energy; its
     alternating part, a = (x_k − 2x_{k+1} + x_{k+2})/4 (exact for a period-2 signal), is
-    compared with its standard deviation to say how much of ω_b the ripple is.
+    compared with its standard deviation to say how much of ω_b the ripple is. When the
+    acceleration saturation binds (and the rate one does not), each step moves ω_b by exactly
+    dt·a_max: a limit cycle held by that limit has step_ratio = 1.
     """
     x = w_b @ signals.dominant_step_direction(w_b)
     alt = (x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+    step = float(np.median(np.linalg.norm(np.diff(w_b, axis=0), axis=1)))
     return {"lag1": float(signals.lag1_autocorrelation(x)), "std": float(x.std()),
-            "step_rms": float(signals.step_rms(x)), "alternating_rms": float(signals.rms(alt))}
+            "step_rms": float(signals.step_rms(x)), "alternating_rms": float(signals.rms(alt)),
+            "step_median": step, "step_bound": dt * acc_bound,
+            "step_ratio": step / (dt * acc_bound)}
+
+
+def mu_max_along(path, dt: float, mu_bus: float, floor: float) -> dict:
+    """μ_max = dt_mu_max/dt over every logged step against the closed form μ_bus = D_b/I_zz,bus
+    (eq. 21): its range, the largest relative deviation, and how near the log came to the
+    singularity (the smallest s_min_J and s_min_G, and the damped inverse's floor, eq. 6)."""
+    c = read_columns(path, ["dt_mu_max", "s_min_J", "s_min_G"])
+    mu = c["dt_mu_max"] / dt
+    dev = np.abs(mu / mu_bus - 1.0)
+    return {"min": float(mu.min()), "max": float(mu.max()), "closed_form": mu_bus,
+            "max_rel_dev": float(dev.max()), "worst_step": int(np.argmax(dev)),
+            "steps": int(mu.size), "s_min_J_min": float(c["s_min_J"].min()),
+            "s_min_G_min": float(c["s_min_G"].min()), "floor": floor,
+            "steps_below_floor": int(np.sum(c["s_min_J"] < floor))}
 
 
 def mission_metrics(cols: dict[str, np.ndarray]) -> dict:

@@ -1,12 +1,19 @@
 """Theory at one step: damping-mode rates, critical step and the 18×18 discrete map (eqs. 21–24).
 
 The map linearises the attitude-and-camera loop about a rest state (v̆ = v̆_des, x̃ = 0,
-saturations inactive, γ constant) for the simulator's update order: v̆ first, then q moves
-with the new velocity, so x̃⁺ = x̃ + dt J_x e⁺. With z = [x̃; e], e = v̆ − v̆_des:
+saturations inactive, γ constant). With z = [x̃; e], e = v̆ − v̆_des:
 
     explicit:  A_e = I − dt M̆⁻¹D̆,         B = −dt M̆⁻¹ K_x
     imex:      A_e = (M̆ + dt D̆)⁻¹ M̆,      B = −dt (M̆ + dt D̆)⁻¹ K_x
-    Φ = [[I + dt J_x B, dt J_x A_e], [B, A_e]],   K_x = J_xᵀ K̆ + K_posture
+    K_x = J_xᵀ K̆ + K_posture
+
+Two update orders of the configuration (eq. 22):
+
+    simulator:  x̃⁺ = x̃ + dt J_x e⁺  (v̆ first, then q moves with the new velocity)
+                Φ = [[I + dt J_x B, dt J_x A_e], [B, A_e]]
+    note:       x̃⁺ = x̃ + dt J_x e   (fully explicit: q moves with the old velocity, the order
+                the seed note's eigenvalue −2.81 matches)
+                Φ = [[I, dt J_x], [B, A_e]]
 """
 
 from __future__ import annotations
@@ -41,9 +48,13 @@ def regime(dt_mu: float) -> str:
     return "growing period-2"
 
 
+UPDATE_ORDERS = ("simulator", "note")
+
+
 def discrete_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
-                 dt: float, integrator: str) -> np.ndarray:
-    """Φ, the 18×18 map z⁺ = Φ z of the linearised loop (eq. 22)."""
+                 dt: float, integrator: str, order: str = "simulator") -> np.ndarray:
+    """Φ, the 18×18 map z⁺ = Φ z of the linearised loop (eq. 22), for the simulator's update
+    order (x̃ advances with e⁺) or the note's fully explicit one (x̃ advances with e)."""
     n = M_breve.shape[0]
     if integrator == "explicit":
         A_e = np.eye(n) - dt * np.linalg.solve(M_breve, D_breve)
@@ -54,7 +65,11 @@ def discrete_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x:
         B = -dt * np.linalg.solve(W, K_x)
     else:
         raise ValueError(f"unknown integrator {integrator!r}")
-    return np.block([[np.eye(n) + dt * J_x @ B, dt * J_x @ A_e], [B, A_e]])
+    if order == "simulator":
+        return np.block([[np.eye(n) + dt * J_x @ B, dt * J_x @ A_e], [B, A_e]])
+    if order == "note":
+        return np.block([[np.eye(n), dt * J_x], [B, A_e]])
+    raise ValueError(f"unknown update order {order!r} (one of {', '.join(UPDATE_ORDERS)})")
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from pipeline.reports.claims_file import (
     ClaimsFile,
     load_claims,
     needed_runs,
+    note_path,
     split_metric,
 )
 from pipeline.reports.runs import RunRecord, display_path, ensure_analysis, ensure_run
@@ -109,6 +110,7 @@ class Context:
         self._cross: dict | None = None
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
+        self._note = None
 
     def _spec(self, name: str):
         ref = self.cf.runs[name].spec
@@ -118,12 +120,22 @@ class Context:
 
     def prepare(self) -> None:
         for name in needed_runs(self.cf):
-            self.runs[name] = ensure_run(self._spec(name), self.logs)
+            self.runs[name] = ensure_run(self._spec(name), self.logs, self.cf.runs[name].expect)
         for name in needed_runs(self.cf):
             dep = self.cf.runs[name].against
             self.analyses[name] = ensure_analysis(
                 self.runs[name], self.out, self.runs.get(dep),
                 self.analyses.get(dep) if dep else None)
+
+    def note(self):
+        """The seed note's published values (the claims file's ``note:``), or None."""
+        from pipeline.reports.seed_note import load_note
+
+        if self.cf.note is None:
+            return None
+        if self._note is None:
+            self._note = load_note(note_path(self.cf, self.cf.source))
+        return self._note
 
     def cross_check(self) -> dict:
         if self._cross is None:
@@ -150,12 +162,18 @@ class Context:
             if spec.endswith((".yaml", ".yml")) and not Path(spec).is_absolute():
                 spec = str(self.here / spec)
             self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
-                                               self.out / "sweeps", ref.workers)
+                                               self.out / "sweeps", ref.workers, ref.key,
+                                               ref.lag, ref.predicted)
         return self._sweeps[alias]
 
     def value(self, metric: str) -> tuple[Any, dict]:
         """The value of ``SOURCE:PATH`` and its provenance."""
         source, path = split_metric(metric)
+        if source == "note":
+            key, _, column = path.partition(".")
+            note = self.note()
+            return note.value(key, column), {"source": source, "code_version": "—",
+                                             "file": display_path(note.source)}
         if source == "sweep":
             alias, _, key = path.partition(".")
             bracket, prov = self.sweep(alias)
@@ -183,7 +201,9 @@ class Context:
         return dig(record, path, f"the analysis.json of {source}"), prov
 
 
-def compare_values(op: str, value: Any, threshold: Any) -> bool:
+def compare_values(op: str, value: Any, threshold: Any, rel_tol: float | None = None) -> bool:
+    """Whether ``value op threshold`` holds; NaN never holds. ``close``: |value − threshold| ≤
+    rel_tol·|threshold|."""
     fn = OPERATORS[op][0]
     if op in ("eq", "ne"):
         return bool(fn(value, threshold))
@@ -191,8 +211,10 @@ def compare_values(op: str, value: Any, threshold: Any) -> bool:
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             raise SpecError(f"operator {op} needs numbers, the {what} is "
                             f"{type(x).__name__} {x!r}"[:160])
-    if isinstance(value, float) and math.isnan(value):
+    if math.isnan(value) or math.isnan(threshold):
         return False
+    if op == "close":
+        return bool(abs(value - threshold) <= rel_tol * abs(threshold))
     return bool(fn(value, threshold))
 
 
@@ -208,7 +230,7 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
                 if chk.threshold_metric:
                     thr, p2 = ctx.value(chk.threshold_metric)
                     prov.append(p2)
-                ok = compare_values(chk.op, value, thr)
+                ok = compare_values(chk.op, value, thr, chk.rel_tol)
             except SpecError as exc:
                 raise SpecError(f"{cf.source}: claim {claim.id}: check {k}: metric "
                                 f"{chk.metric}: {exc}") from None
@@ -224,8 +246,22 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path) -> Path:
+def seed_table(ctx: Context) -> list:
+    """The note's evidence table beside the claims' runs of its columns (by run name)."""
+    from pipeline.reports.seed_note import COLUMNS, note_table
+
+    note = ctx.note()
+    if note is None:
+        return []
+    return note_table(note, {c: ctx.analyses[c] for c in COLUMNS if c in ctx.analyses})
+
+
+def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
+                 note_rows: list | None = None) -> Path:
+    from pipeline.reports.seed_note import fmt
+
     ctx = {"results": results, "claims_file": display_path(cf.source),
+           "note_rows": note_rows or [], "fmt": fmt,
            "code_version": code_version(),
            "counts": {s: sum(r.status == s for r in results)
                       for s in ("PASS", "FAIL", "OPEN", "NOW HOLDS")}}
@@ -235,6 +271,7 @@ def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path) -> Pat
             "claims": [{"id": r.claim.id, "statement": r.claim.statement,
                         "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,
+                                    "rel_tol": c.check.rel_tol,
                                     "value": _jsonable(c.value),
                                     "threshold": _jsonable(c.threshold), "ok": c.ok}
                                    for c in r.checks],
@@ -249,7 +286,7 @@ def claims_command(claims: Path, out: Path) -> int:
     ctx = Context(cf, out)
     ctx.prepare()
     results = evaluate(cf, ctx)
-    path = write_claims(results, cf, out)
+    path = write_claims(results, cf, out, seed_table(ctx))
     for r in results:
         detail = "; ".join(f"{c.check.metric} = {_short(c.value)} ({c.symbol} "
                            f"{_short(c.threshold)})" for c in r.checks)

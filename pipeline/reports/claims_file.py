@@ -13,11 +13,14 @@
 
 A metric is ``SOURCE:PATH``. SOURCE is a run name (PATH a dotted path into its analysis.json,
 or ``spec.…`` into its resolved spec, or ``log.GROUP.STAT`` for a statistic of its logged
-reduced velocity), ``cross_check``, ``baselines`` or ``sweep`` (PATH: a name under ``sweeps:``
-then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``). A threshold is a
-literal or ``{metric: SOURCE:PATH}``. A file may ``extends:`` another (by path relative to
-itself): its ``runs`` and ``sweeps`` override the parent's by name, its ``claims`` are added
-after the parent's.
+reduced velocity), ``cross_check``, ``baselines``, ``sweep`` (PATH: a name under ``sweeps:``
+then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``) or ``note`` (PATH:
+ROW.COLUMN of the seed note's published values, the file named by ``note:``, e.g.
+``note:dt_mu_max.nominal``). A threshold is a literal or ``{metric: SOURCE:PATH}``. The
+operator ``close`` holds when |value − threshold| ≤ rel_tol·|threshold| (``rel_tol`` given
+with it). A run expected to diverge says ``expect: diverged``. A file may ``extends:`` another
+(by path relative to itself): its ``runs`` and ``sweeps`` override the parent's by name, its
+``claims`` are added after the parent's.
 """
 
 from __future__ import annotations
@@ -43,9 +46,10 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
     "ge": (operator.ge, "≥"), "eq": (operator.eq, "="), "ne": (operator.ne, "≠"),
     "abs_lt": (_abs(operator.lt), "|·| <"), "abs_le": (_abs(operator.le), "|·| ≤"),
     "abs_gt": (_abs(operator.gt), "|·| >"), "abs_ge": (_abs(operator.ge), "|·| ≥"),
+    "close": (lambda a, b: True, "≈"),  # with rel_tol: see compare_values in claims.py
 }
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
-FIXED_SOURCES = ("cross_check", "baselines", "sweep")
+FIXED_SOURCES = ("cross_check", "baselines", "sweep", "note")
 LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
               "camera_roll": slice(8, 9), "v_breve": slice(0, 9)}
 LOG_STATS = ("ripple", "step_rms", "lag1_min", "lag1_max", "rms")
@@ -59,6 +63,7 @@ class ClaimCheck(_Strict):
     metric: str
     op: str
     threshold: Any = None
+    rel_tol: float | None = Field(default=None, gt=0, allow_inf_nan=False)
 
     @property
     def threshold_metric(self) -> str | None:
@@ -83,19 +88,26 @@ class Claim(_Strict):
 class RunRef(_Strict):
     spec: str
     against: str | None = None
+    expect: Literal["complete", "diverged"] = "complete"
 
 
 class SweepRef(_Strict):
-    """A sweep the claims use: ``python -m pipeline sweep SPEC --set … --name NAME``."""
+    """A sweep the claims use: ``python -m pipeline sweep SPEC --set … --name NAME``, and how
+    its stability bracket reads the table: the swept ``key`` (a column), the ``lag`` column
+    whose sign flips and the ``predicted`` column of the predicted crossing in ``key`` units."""
 
     spec: str
     set: list[str] = Field(min_length=1)
     name: str
     workers: int = Field(default=2, gt=0)
+    key: str = "mission.dt"
+    lag: str = "dominant_lag1"
+    predicted: str = "dt_star"
 
 
 class ClaimsFile(_Strict):
     logs: str = "logs"
+    note: str | None = None  # the seed note's values (specs/seed_note.yaml), relative to here
     runs: dict[str, RunRef] = Field(default_factory=dict)
     sweeps: dict[str, SweepRef] = Field(default_factory=dict)
     claims: list[Claim] = Field(min_length=1)
@@ -127,6 +139,8 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     if parent is None:
         return data
     base = _read(path.parent / str(parent), (*chain, path))
+    if "note" in base and "note" not in data:  # the parent's note file, seen from here
+        base["note"] = str((path.parent / str(parent)).resolve().parent / base["note"])
     merged = deep_merge(base, {k: v for k, v in data.items() if k != "claims"})
     merged["claims"] = list(base.get("claims", [])) + list(data.get("claims", []))
     return merged
@@ -180,6 +194,9 @@ def validate(cf: ClaimsFile, path: Path) -> None:
             if chk.op not in OPERATORS:
                 raise SpecError(f"{where}: unknown operator {chk.op!r} "
                                 f"(one of {', '.join(OPERATORS)})")
+            if (chk.op == "close") != (chk.rel_tol is not None):
+                raise SpecError(f"{where}: rel_tol goes with operator close, and close needs "
+                                f"it")
             for metric in filter(None, (chk.metric, chk.threshold_metric)):
                 try:
                     source, mpath = split_metric(metric)
@@ -190,10 +207,27 @@ def validate(cf: ClaimsFile, path: Path) -> None:
                                     f"{source!r} (one of {sources})")
                 if source in cf.runs and mpath.startswith("log."):
                     _check_log_path(metric, mpath, where)
+                if source == "note":
+                    _check_note_path(cf, path, metric, mpath, where)
                 if source == "sweep" and mpath.split(".")[0] not in cf.sweeps:
                     raise SpecError(f"{where}: unknown metric path {metric!r}: no sweep "
                                     f"{mpath.split('.')[0]!r} (sweeps: "
                                     f"{', '.join(cf.sweeps) or 'none'})")
+
+
+def note_path(cf: ClaimsFile, claims_path: Path | str) -> Path:
+    """The note file of a claims file, resolved against the claims file's folder."""
+    p = Path(cf.note or "")
+    return p if p.is_absolute() else Path(claims_path).resolve().parent / p
+
+
+def _check_note_path(cf: ClaimsFile, path: Path, metric: str, mpath: str, where: str) -> None:
+    from pipeline.reports.seed_note import load_note
+
+    if cf.note is None:
+        raise SpecError(f"{where}: metric {metric!r} needs a `note:` file in the claims file")
+    key, _, column = mpath.partition(".")
+    load_note(note_path(cf, path)).value(key, column)
 
 
 def _check_log_path(metric: str, mpath: str, where: str) -> None:

@@ -199,3 +199,48 @@ def sweep_map(table: Path, path: Path) -> str | None:
     fig.tight_layout()
     _save(fig, path)
     return None
+
+
+def sweep_key(table: Path) -> str | None:
+    """The swept key of a sweep table (its schema metadata), or None if unreadable."""
+    import pyarrow.parquet as pq
+
+    try:
+        md = pq.read_schema(table).metadata or {}
+    except (OSError, ValueError):
+        return None
+    keys = md.get(b"pipeline.keys", b"").decode().split(",")
+    return next((k for k in keys if k != "mission.duration"), None)
+
+
+def inertia_map(table: Path, path: Path) -> str | None:
+    """ω_b's lag-1 and period-2 amplitude against I_zz,bus over a bus-inertia sweep, with the
+    predicted crossing; returns why it was skipped, if it was."""
+    df = pd.read_parquet(table)
+    need = ["I_zz_bus", "bus_rate_lag1", "bus_rate_alternating_rms", "bus_critical_I_zz"]
+    missing = [c for c in need if c not in df]
+    if missing:
+        return f"{table}: no column {', '.join(missing)}"
+    df = df[df["status"] == "complete"].dropna(subset=need).sort_values("I_zz_bus")
+    if df.empty:
+        return f"{table}: no complete point"
+    crit = float(df["bus_critical_I_zz"].median())
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    ring = df["bus_rate_lag1"] < 0
+    for ax, col, ttl, ylab in (
+            (a1, "bus_rate_lag1", "lag-1 of ω_b's dominant step component", "r₁"),
+            (a2, "bus_rate_alternating_rms", "ω_b period-2 amplitude", "rad/s")):
+        ax.plot(df["I_zz_bus"], df[col], "-", color="0.6", lw=0.8)
+        ax.plot(df["I_zz_bus"][ring], df[col][ring], "s", color="tab:red", label="r₁ < 0")
+        ax.plot(df["I_zz_bus"][~ring], df[col][~ring], "o", color="tab:green", label="r₁ ≥ 0")
+        ax.axvline(crit, color="k", ls="--", lw=0.8,
+                   label=f"predicted I_zz,bus = dt·D_b/2 = {crit:.4g} kg·m²")
+        ax.set_xscale("log")
+        ax.set(title=ttl, xlabel="I_zz,bus (kg·m²)", ylabel=ylab)
+    a2.set_yscale("log")
+    a1.set_ylim(-1.05, 1.05)
+    a1.legend(fontsize=7, loc="center right")
+    fig.suptitle(label(f"bus-inertia sweep {table.parent.name}"))
+    fig.tight_layout()
+    _save(fig, path)
+    return None

@@ -11,6 +11,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from pipeline.reports.figures import RunData
+from pipeline.reports.seed_note import NOTE_FILE, fmt, load_note, note_table
 
 V_BREVE_LABELS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x (linear)", "ν_e,y (linear)",
                   "ν_e,z (linear)", "ω_e,x", "ω_e,y", "ω_e,z (camera roll about the boresight)")
@@ -52,6 +53,21 @@ def verdict(run: dict, other: dict) -> Verdict:
     return Verdict("inconclusive", "The numbers do not match the period-2 mechanism.")
 
 
+def robot_card(rec: dict) -> dict:
+    """The record's robot card with the bus inertia's diagonal, as the templates show it."""
+    card = dict(rec["robot"])
+    card["bus_inertia_diag"] = np.diag(np.array(card["bus_inertia"])).tolist()
+    return card
+
+
+def note_rows(rec: dict, other: dict) -> list:
+    """The seed note's table beside this pair, when the pair is the note's own (its runs)."""
+    note = load_note(NOTE_FILE)
+    if (rec["spec_name"], other["spec_name"]) != (note.runs["nominal"], note.runs["dt010"]):
+        return []
+    return note_table(note, {"nominal": rec, "dt010": other})
+
+
 def mechanism_context(run: RunData, others: list[RunData]) -> dict:
     """Everything the mechanism templates show, for ``run`` and its comparison."""
     rec = run.record
@@ -73,4 +89,6 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
         "flipped": flipped, "n_directions": len(other["directions"]),
         "fix_runs": fixes, "diag_D": np.diag(np.array(th["D_breve"])).tolist(),
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
+        "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
+        "note_rows": note_rows(rec, other), "fmt": fmt,
     }

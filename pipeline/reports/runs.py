@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pipeline.analysis.cli import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
-from pipeline.errors import LogError
+from pipeline.errors import LogError, RunFailed
 from pipeline.logs import LogMeta, num_rows, read_meta
 from pipeline.sim.run import log_path, run_spec
 from pipeline.spec import PROJECT_ROOT, Spec
@@ -40,8 +40,9 @@ def display_path(path: Path | str) -> str:
         return str(p)
 
 
-def reusable(spec: Spec, path: Path) -> LogMeta | None:
-    """The log's metadata if it is a finished run of this spec under this code, else None."""
+def reusable(spec: Spec, path: Path, expect: str = "complete") -> LogMeta | None:
+    """The log's metadata if it is a finished run of this spec under this code that ended as
+    ``expect`` (``complete`` with every step, or ``diverged``), else None."""
     if not path.is_file():
         return None
     try:
@@ -49,18 +50,26 @@ def reusable(spec: Spec, path: Path) -> LogMeta | None:
         rows = num_rows(path)
     except LogError:
         return None
-    ok = (meta.status == "complete" and meta.spec_hash == spec.spec_hash
-          and meta.code_version == code_version() and rows == spec.n_steps)
+    ok = (meta.status == expect and meta.spec_hash == spec.spec_hash
+          and meta.code_version == code_version()
+          and (rows == spec.n_steps if expect == "complete" else True))
     return meta if ok else None
 
 
-def ensure_run(spec: Spec, logs_dir: Path) -> RunRecord:
+def ensure_run(spec: Spec, logs_dir: Path, expect: str = "complete") -> RunRecord:
+    """The log of ``spec``, reused or run; a run that does not end as ``expect`` (a
+    ``complete`` one that diverges, or the reverse) is a RunFailed."""
     path = log_path(spec, logs_dir)
-    meta = reusable(spec, path)
+    meta = reusable(spec, path, expect)
     if meta is not None:
         return RunRecord(spec, path, meta, True)
     print(f"running {spec.name} ({spec.n_steps} steps) -> {display_path(path)}", file=sys.stderr)
-    out = run_spec(spec, logs_dir, progress=sys.stderr.isatty())
+    out = run_spec(spec, logs_dir, progress=sys.stderr.isatty(), raise_on_failure=False)
+    if out.status != expect:
+        raise RunFailed(f"{spec.name}: expected a {expect} run, got {out.status}"
+                        + (f" at {out.error}" if out.error else "") + f"; log: {out.path}")
+    for w in out.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     return RunRecord(spec, out.path, read_meta(out.path), False)
 
 

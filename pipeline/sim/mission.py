@@ -43,6 +43,13 @@ from pipeline.spec import Spec
 
 _Q, _V, _TAU, _DQ = STATE["q"], STATE["v"], STATE["tau"].start, STATE["dq"]
 _DT_MU = ROW["dt_mu_max"].start
+_SAT_V_MAX = ROW["sat_v_max"].start
+
+# Divergence criterion (eq. 16): the v_max clip binding on this many consecutive steps. The
+# clip is the last guard, far above any commanded motion (50 against rate limits below 1), so
+# a velocity that stays on it has run away: the run ends there, marked ``diverged``, rather
+# than going on as a finite but meaningless "complete" log.
+DIVERGENCE_STEPS = 3
 
 
 @dataclass
@@ -171,7 +178,9 @@ class Mission:
         return nxt, {name: cols[name][0] for name in ROW}
 
     def run(self, progress: bool = False) -> MissionResult:
-        """Run every step; a non-finite state ends the run with status ``failed``."""
+        """Run every step. A non-finite state ends the run with status ``failed`` (its log
+        holds the steps before it); the v_max clip binding on ``DIVERGENCE_STEPS`` consecutive
+        steps ends it with status ``diverged`` (its log holds the steps up to that one)."""
         n = self.spec.n_steps
         rows = np.zeros((n, ROW_SIZE))
         s0 = self.initial_state()
@@ -181,6 +190,7 @@ class Mission:
         coverage = CoverageCounter(self.target, self.spec.camera)
         guard = self.spec.controller.integrator == "explicit"
         warned: list[str] = []
+        clipped = 0
         # Overflow shows as a non-finite state, caught below at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
                                              mininterval=0.5, desc=self.spec.name) as bar:
@@ -196,6 +206,12 @@ class Mission:
                     return MissionResult(cols, "failed", k, f"step {k}: {why}", warned)
                 if guard and not warned and rows[k, _DT_MU] > 2:
                     warned.append(stability_warning(k, float(rows[k, _DT_MU]), self.dt))
+                clipped = clipped + 1 if rows[k, _SAT_V_MAX] > 0.5 else 0
+                if clipped >= DIVERGENCE_STEPS:
+                    cols = log_columns(rows[:k + 1], self.dt)
+                    why = divergence_message(k, float(rows[k, _DT_MU]), self.dt,
+                                             self.spec.controller.integrator)
+                    return MissionResult(cols, "diverged", k, why, warned)
                 if progress and (k + 1) % 100 == 0:
                     bar.update(100)
             bar.update(n - bar.n)
@@ -211,6 +227,16 @@ def log_columns(rows: np.ndarray, dt: float = 0.0) -> dict[str, np.ndarray]:
     cols |= {c: rows[:, ROW[c].start] > 0.5 for c in LIMIT_FLAGS}
     cols["step"] = np.arange(n, dtype=np.int64)
     return cols
+
+
+def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) -> str:
+    """Why a run was stopped as diverged, with the bound and the fix (eqs. 16, 21, 24)."""
+    dt_star = 2 * dt / dt_mu_max
+    fix = ("set controller.integrator: imex, or mission.dt below dt* "
+           if integrator == "explicit" and dt_mu_max > 2 else "check the gains and limits; dt* ")
+    return (f"step {step}: the velocity stayed on the v_max clip for {DIVERGENCE_STEPS} "
+            f"consecutive steps; dt·μ_max = {dt_mu_max:.3g}, dt* = 2/μ_max = {dt_star:.4g} s. Fix: "
+            f"{fix}= {dt_star:.4g} s")
 
 
 def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:

@@ -1,4 +1,4 @@
-"""The free-floating servicer: Pinocchio model, task transform Γ and transformed dynamics.
+"""The free-floating robot: Pinocchio model, task transform Γ and transformed dynamics.
 
 Conventions (eq. 1): q = [p_b (t frame); quat_tb (x, y, z, w); q_arm (6)],
 v = [v_b (b frame); ω_b (b frame); q̇ (6)], Pinocchio's free-flyer convention. Frames: t
@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.sim import task_transform as tt
+from pipeline.sim.robot_file import RobotCard, load_robot_model, robot_card
 from pipeline.sim.sampling import Sampling, sigma_min_and_cond
 from pipeline.spec import Spec
 
@@ -71,15 +72,13 @@ class Terms:
 
 
 class GiordanoRobot:
-    """Model, data, sampler and per-state terms of the servicer (DESIGN §2)."""
+    """Model, data, sampler and per-state terms of a free-floating robot (eqs. 1–11)."""
 
     def __init__(self, spec: Spec):
         self.spec = spec
-        self.model = pin.buildModelFromUrdf(str(spec.robot_path), pin.JointModelFreeFlyer())
-        self.model.gravity.setZero()
+        self.model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
+                                      spec.robot.bus_inertia_scale)
         self.data = self.model.createData()
-        if not self.model.existFrame(spec.robot.camera_frame):
-            raise ValueError(f"robot has no frame {spec.robot.camera_frame!r}")
         self.frame_id = self.model.getFrameId(spec.robot.camera_frame)
         self.mass = float(pin.computeTotalMass(self.model))
         self.n = self.model.nv - 6
@@ -100,6 +99,10 @@ class GiordanoRobot:
         d, fid = self.data, self.frame_id
         return (d.oMi[1].rotation, d.oMi[1].translation, d.oMf[fid].rotation,
                 d.oMf[fid].translation, d.Ag, d.dAg)
+
+    def card(self, q: np.ndarray) -> RobotCard:
+        """The robot card at configuration q, with the spec's bus damping gain (eq. 21)."""
+        return robot_card(self.model, q, self.spec.controller.gains.bus.D)
 
     # -- configurations -------------------------------------------------------------------
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:

@@ -27,9 +27,10 @@ def log_path(spec: Spec, out_dir: Path) -> Path:
 
 def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
              raise_on_failure: bool = True) -> RunOutcome:
-    """Simulate ``spec`` and write its log atomically; a diverged run is logged as failed.
+    """Simulate ``spec`` and write its log atomically, marked ``complete``, ``failed`` (a
+    non-finite state) or ``diverged`` (the v_max clip held, see ``DIVERGENCE_STEPS``).
 
-    Raises RunFailed (after writing the failed log) unless ``raise_on_failure`` is false.
+    Raises RunFailed (after writing the log) unless ``raise_on_failure`` is false.
     """
     result = Mission(spec).run(progress=progress)
     meta = LogMeta(
@@ -44,5 +45,6 @@ def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
     outcome = RunOutcome(path, result.status, len(result.columns["step"]), result.warnings,
                          result.error)
     if result.status != "complete" and raise_on_failure:
-        raise RunFailed(f"{spec.name}: run failed at {result.error}; log marked failed: {path}")
+        raise RunFailed(f"{spec.name}: run {result.status} at {result.error}; log marked "
+                        f"{result.status}: {path}")
     return outcome

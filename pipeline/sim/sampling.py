@@ -7,11 +7,12 @@ Jacobian-producing function, and ``scale_by_svd``, the one piecewise-linear ramp
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.errors import SpecError
 from pipeline.sim.jit import jit
 from pipeline.sim.svd import singular_values
 from pipeline.spec import ConfigSampling, Ramp
@@ -97,7 +98,30 @@ class Sampling:
         ranked = self.sorted_samples(q_bar, func, num)
         return ranked[-1] if ranked and ranked[-1].sigma_min is not None else None
 
-    def scale_by_svd(self, sigma: float, opts: Ramp | None = None) -> float:
-        """γ ramp (eq. 20) with ``opts`` or this block's own low/high/floor."""
+    def scale_by_svd(self, sigma: float, opts: Ramp | Mapping | None = None) -> float:
+        """γ ramp (eq. 20) with ``opts`` or this block's own low/high/floor.
+
+        ``opts`` is a typed block (``Ramp``) or, as the seed note writes it, a mapping
+        ``{low, high, floor}``, validated like the spec's block (SpecError naming the key).
+        """
+        if isinstance(opts, Mapping):
+            opts = ramp_from_mapping(opts)
         o = opts or self.cfg
         return scale_by_svd(sigma, o.low, o.high, o.floor)
+
+
+def ramp_from_mapping(opts: Mapping) -> Ramp:
+    """A ``{low, high, floor}`` mapping as the validated ramp block (eq. 20)."""
+    from pydantic import ValidationError
+
+    missing = [k for k in ("low", "high", "floor") if k not in opts]
+    if missing:
+        raise SpecError(f"scale_by_svd opts: key {missing[0]!r} missing (needs low, high, "
+                        f"floor)")
+    try:
+        return Ramp.model_validate(dict(opts))
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(x) for x in err["loc"]) or "opts"
+        msg = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
+        raise SpecError(f"scale_by_svd opts: {where}: {msg}") from None

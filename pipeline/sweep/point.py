@@ -51,6 +51,11 @@ FIGURES: dict[str, tuple[str, ...]] = {
     "velocity_jump_median": ("velocity_jump", "median"),
     "pointing_err_deg_max": ("metrics", "pointing_err_deg_max"),
     "coverage_final": ("metrics", "coverage_final"),
+    "bus_rate_lag1": ("bus_rate", "lag1"),
+    "bus_rate_alternating_rms": ("bus_rate", "alternating_rms"),
+    "I_zz_bus": ("robot", "I_zz_bus"),
+    "mu_bus": ("robot", "mu_bus"),
+    "bus_critical_I_zz": ("bus_mode", "critical_I_zz"),
 }
 
 

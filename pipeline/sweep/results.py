@@ -85,36 +85,42 @@ def summary_text(df: pd.DataFrame, keys: list[str], path: Path) -> str:
     return "\n".join(lines)
 
 
-def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "mission.dt") -> dict:
-    """Where the measured dominant lag-1 changes sign along ``key``, against dt* = 2/μ_max.
+def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "mission.dt",
+                      lag: str = "dominant_lag1", predicted: str = "dt_star") -> dict:
+    """Where the measured lag-1 (column ``lag``) changes sign along ``key``, against the
+    predicted crossing (column ``predicted``, in ``key`` units): by default the dominant
+    lag-1 along mission.dt against dt* = 2/μ_max.
 
     Uses the complete rows sorted by ``key``. ``measured`` is the interval between the two
     grid points where the lag-1 changes sign (None unless it changes sign exactly once);
-    ``predicted`` is the interval between the grid points that bracket the predicted dt*
+    ``predicted`` is the interval between the grid points that bracket the predicted crossing
     (the median over the points; its spread is ``dt_star_range``). ``holds`` is true when
-    the sign changes exactly once and every point's predicted dt* lies in the measured
-    interval (``lo < dt* <= hi``).
+    the sign changes exactly once and every point's predicted crossing lies in the measured
+    interval (``lo < crossing <= hi``). The keys say ``dt_star`` whatever the column.
     """
     df = (sweep_table if isinstance(sweep_table, pd.DataFrame)
           else read_sweep_table(sweep_table))
-    if key not in df.columns:
-        raise LogError(f"sweep table has no column {key!r} (columns: {', '.join(df.columns)})")
-    ok = df[(df["status"] == "complete") & df["dominant_lag1"].notna()].sort_values(key)
+    for col in (key, lag, predicted):
+        if col not in df.columns:
+            raise LogError(f"sweep table has no column {col!r} (columns: "
+                           f"{', '.join(df.columns)})")
+    ok = df[(df["status"] == "complete") & df[lag].notna()].sort_values(key)
     x = ok[key].to_numpy(float)
-    lag = ok["dominant_lag1"].to_numpy(float)
-    stars = ok["dt_star"].dropna().to_numpy(float)
+    lag_values = ok[lag].to_numpy(float)
+    stars = ok[predicted].dropna().to_numpy(float)
     flips = [(float(x[i]), float(x[i + 1])) for i in range(len(x) - 1)
-             if np.sign(lag[i]) != np.sign(lag[i + 1])]
+             if np.sign(lag_values[i]) != np.sign(lag_values[i + 1])]
     dt_star = float(np.median(stars)) if stars.size else math.nan
     below, above = x[x <= dt_star], x[x > dt_star]
-    predicted = (float(below.max()) if below.size else None,
-                 float(above.min()) if above.size else None)
+    predicted_bracket = (float(below.max()) if below.size else None,
+                         float(above.min()) if above.size else None)
     measured = flips[0] if len(flips) == 1 else None
     holds = bool(measured is not None and stars.size
                  and all(measured[0] < s <= measured[1] for s in stars))
     return {
-        "key": key, "n_points": len(df), "n_complete": len(ok), "grid": x.tolist(),
-        "lag1": lag.tolist(), "flips": flips, "measured": measured, "dt_star": dt_star,
+        "key": key, "lag": lag, "predicted_column": predicted, "n_points": len(df),
+        "n_complete": len(ok), "grid": x.tolist(), "lag1": lag_values.tolist(),
+        "flips": flips, "measured": measured, "dt_star": dt_star,
         "dt_star_range": (float(stars.min()), float(stars.max())) if stars.size else None,
-        "predicted": predicted, "holds": holds,
+        "predicted": predicted_bracket, "holds": holds,
     }

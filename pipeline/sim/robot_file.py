@@ -1,0 +1,110 @@
+"""Robot files: one loader for URDF and MJCF, validated, and the robot card (eq. 1).
+
+A robot of this project is a free-floating bus (the root body, on a free joint) carrying a
+6-DoF arm with a camera frame. A URDF describes the bus and the arm; the free joint is added
+here. An MJCF declares it itself (``<freejoint/>`` on the root body), as MuJoCo models do.
+Either way the loaded model must have nq = 13, nv = 12, a free flyer as joint 1 and the
+camera frame; anything else is a :class:`~pipeline.errors.SpecError` naming the file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import SpecError
+
+MJCF_SUFFIXES = (".xml", ".mjcf")
+N_JOINTS = 6
+
+
+def _parse(path: Path) -> pin.Model:
+    try:
+        if path.suffix.lower() in MJCF_SUFFIXES:
+            return pin.buildModelFromMJCF(str(path))
+        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    except Exception as exc:  # Pinocchio raises RuntimeError, ValueError or its own kinds
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise SpecError(f"{path}: not a loadable robot file ({first[:200]})") from None
+
+
+def load_robot_model(path: Path | str, camera_frame: str,
+                     bus_inertia_scale: float = 1.0) -> pin.Model:
+    """The Pinocchio model of a robot file, gravity off, validated (eq. 1).
+
+    ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body on the free
+    joint about its own centre of mass; its mass and centre of mass stay.
+    """
+    path = Path(path)
+    model = _parse(path)
+    kinds = [j.shortname() for j in model.joints[1:]]
+    if model.njoints < 2 or kinds[0] != "JointModelFreeFlyer":
+        raise SpecError(f"{path}: the root joint must be a free joint (the bus); found "
+                        f"{kinds[0] if kinds else 'none'}")
+    if model.nq != 7 + N_JOINTS or model.nv != 6 + N_JOINTS:
+        raise SpecError(f"{path}: a {N_JOINTS}-DoF arm needs nq = {7 + N_JOINTS} and nv = "
+                        f"{6 + N_JOINTS}; this model has nq = {model.nq}, nv = {model.nv} "
+                        f"({len(kinds) - 1} arm joints)")
+    if not model.existFrame(camera_frame):
+        raise SpecError(f"{path}: no frame {camera_frame!r} (robot.camera_frame)")
+    model.gravity.setZero()
+    if bus_inertia_scale != 1.0:
+        bus = model.inertias[1]
+        model.inertias[1] = pin.Inertia(bus.mass, bus.lever.copy(),
+                                        bus_inertia_scale * bus.inertia)
+    return model
+
+
+@dataclass(frozen=True)
+class RobotCard:
+    """The loaded model as the code sees it: masses, CoM, the bus rigid body's inertia and
+    the bus-yaw damping rate it predicts (eqs. 21, 24)."""
+
+    total_mass: float  # kg
+    com_b: list[float]  # whole-robot CoM in the bus frame at the start configuration, m
+    bus_mass: float  # kg, the rigid body on the free joint
+    bus_com_b: list[float]  # its CoM in the bus frame, m
+    bus_inertia: list[list[float]]  # its rotational inertia about its CoM, bus axes, kg·m²
+    pan_axis_b: list[float]  # first arm joint's axis in the bus frame (unit)
+    pan_axis_offset: float  # distance of the bus CoM from that axis, m
+    I_zz_bus: float  # the bus body's inertia about that axis, kg·m²
+    D_b: float  # bus damping gain, N·m·s/rad
+    mu_bus: float  # D_b / I_zz,bus, 1/s
+    dt_star_bus: float  # 2 / mu_bus, s
+
+
+def robot_card(model: pin.Model, q: np.ndarray, D_b: float) -> RobotCard:
+    """The card of ``model`` at configuration q with bus damping gain D_b.
+
+    I_zz,bus = âᵀ I_c â + m d², â the first arm joint's axis and d the distance of the bus
+    body's CoM from it. When d = 0 the bus yaw about â moves nothing else at a fixed camera
+    pose and CoM, so it is an eigen-direction of M̆ with inertia I_zz,bus, and its damping
+    rate is μ_bus = D_b / I_zz,bus (eq. 21).
+    """
+    data = model.createData()
+    com = pin.centerOfMass(model, data, q)
+    bus = model.inertias[1]
+    pan = model.joints[2]
+    placement = model.jointPlacements[2]
+    # The arm's first joint: a revolute joint about a known local axis of its placement.
+    S = pan.shortname()
+    local = {"JointModelRX": [1, 0, 0], "JointModelRY": [0, 1, 0], "JointModelRZ": [0, 0, 1]}
+    if S in local:
+        axis = placement.rotation @ np.array(local[S], dtype=float)
+    else:  # JointModelRevoluteUnaligned
+        axis = placement.rotation @ np.asarray(pan.axis, dtype=float)
+    axis /= np.linalg.norm(axis)
+    r = bus.lever - placement.translation
+    offset = float(np.linalg.norm(r - axis * (axis @ r)))
+    I_axis = float(axis @ bus.inertia @ axis + bus.mass * offset**2)
+    R_tb = data.oMi[1].rotation
+    mu = D_b / I_axis
+    return RobotCard(
+        total_mass=float(sum(i.mass for i in model.inertias)),
+        com_b=(R_tb.T @ (com - data.oMi[1].translation)).tolist(),
+        bus_mass=float(bus.mass), bus_com_b=bus.lever.tolist(),
+        bus_inertia=bus.inertia.tolist(), pan_axis_b=axis.tolist(), pan_axis_offset=offset,
+        I_zz_bus=I_axis, D_b=float(D_b), mu_bus=mu, dt_star_bus=2.0 / mu)
