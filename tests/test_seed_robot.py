@@ -284,3 +284,57 @@ def test_unbounded_mission_ends_diverged_with_the_bound_and_the_fix(tmp_path):
 def test_a_complete_run_never_reaches_the_divergence_criterion(short_nominal_log):
     assert read_meta(short_nominal_log).status == "complete"
     assert not read_columns(short_nominal_log, ["sat_v_max"])["sat_v_max"].any()
+
+
+# -- the note's table and the reports ------------------------------------------------------------
+
+def test_note_table_puts_the_note_beside_our_values():
+    from pipeline.reports.mechanism import note_rows
+    from pipeline.reports.seed_note import NOTE_FILE, load_note, note_table
+
+    note = load_note(NOTE_FILE)
+    rec = {"spec_name": "nominal", "dominant": {"lag1": -0.999, "sigma": 0.7641},
+           "theory": {"dt_mu_max": 3.84, "note_order": {"eig_dominant": {"real": -2.8098}},
+                      "eig_dominant": {"real": -2.926}},
+           "velocity_jump": {"median": 0.4245}}
+    other = {"spec_name": "omega_ripple_dt010", "dominant": {"lag1": 0.9996},
+             "theory": {"dt_mu_max": 1.28}}
+    rows = {r.key: r for r in note_table(note, {"nominal": rec, "dt010": other})}
+    lag = rows["dominant_lag1"].cells
+    assert (lag[0].note, lag[0].ours) == (-0.92, -0.999)
+    assert lag[0].rel_diff == pytest.approx((-0.999 + 0.92) / 0.92)
+    assert lag[1].ours == 0.9996
+    eig = rows["eig_dominant"].cells[0]
+    assert eig.ours == -2.8098 and dict(eig.also) == {
+        "simulator's update order (q moves with the updated velocity)": -2.926}
+    assert rows["abs_cos"].cells[0].note is None and rows["abs_cos"].cells[0].rel_diff is None
+    assert rows["provenance"].cells[0].ours is None  # not in this record: shown as —
+    # The mechanism report shows the table for the note's own pair only.
+    assert note_rows(rec, other) and not note_rows(rec, {**other, "spec_name": "other"})
+
+
+def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
+    """A diverged log's analysis is listed with its growth and drawn in its own figure; it is
+    kept out of the figures its runaway would swamp."""
+    from pipeline.analysis.cli import write_analysis
+    from pipeline.analysis.stages import compare
+    from pipeline.reports.render import render_all
+
+    logs, out = tmp_path / "logs", tmp_path / "rep"
+    run_spec(load_spec("omega_ripple_unbounded"), logs, raise_on_failure=False)
+    write_analysis(analyze_log(logs / "omega_ripple_unbounded" / "run.parquet"), out)
+    spec = with_overrides(load_spec("nominal"), {"mission.duration": 6.0}, name="n6")
+    dt010 = with_overrides(load_spec("omega_ripple_dt010"), {"mission.duration": 6.0},
+                           name="d6")
+    a, b = run_spec(spec, logs).path, run_spec(dt010, logs).path
+    rec = analyze_log(a)
+    rec["comparison"] = compare(rec, analyze_log(b))
+    write_analysis(rec, out)
+    render_all(out)
+    index = (out / "index.html").read_text()
+    assert "diverged at step" in index and "growth_omega_ripple_unbounded.png" in index
+    assert (out / "figures" / "growth_omega_ripple_unbounded.png").is_file()
+    assert (out / "figures" / "rates.png").is_file()
+    md = (out / "n6" / "mechanism.md").read_text()
+    assert "## Robot card" in md and "predicted μ_bus = D_b / I_zz,bus" in md
+    assert "note's update order" in md or "note's fully" in md

@@ -70,20 +70,48 @@ def _cols(run: RunData, cols: list[str]) -> dict[str, np.ndarray]:
 
 
 def rates(runs: list[RunData], path: Path) -> None:
-    """ω_b over the mission and the camera-roll rate over the last second, per run."""
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6))
+    """‖ω_b‖ over the mission, and the bus yaw rate ω_b,z and the camera roll rate over the
+    last second, per run."""
+    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8))
     for r in runs:
         c = _cols(r, ["t", "v_breve"])
         w = c["v_breve"][:, 0:3]
         a1.plot(c["t"], np.linalg.norm(w, axis=1), lw=0.8, label=label(r.name))
         last = c["t"] >= c["t"][-1] - 1.0
-        a2.plot(c["t"][last], c["v_breve"][last, 8], lw=0.8, marker=".", ms=2,
-                label=label(r.name))
+        for ax, i in ((a2, 2), (a3, 8)):
+            ax.plot(c["t"][last], c["v_breve"][last, i], lw=0.8, marker=".", ms=2,
+                    label=label(r.name))
     a1.set(title="bus angular rate ‖ω_b‖", xlabel="t (s)", ylabel="rad/s")
-    a2.set(title="camera roll rate ω_e,z = v̆[8] (last 1 s)", xlabel="t (s)", ylabel="rad/s")
-    a1.legend(fontsize=7)
-    a2.legend(fontsize=7)
+    a2.set(title="bus yaw rate ω_b,z = v̆[2] (last 1 s)", xlabel="t (s)", ylabel="rad/s")
+    a3.set(title="camera roll rate ω_e,z = v̆[8] (last 1 s)", xlabel="t (s)", ylabel="rad/s")
+    a1.legend(fontsize=7, ncols=2)
     fig.tight_layout()
+    _save(fig, path)
+
+
+def divergence_growth(run: RunData, path: Path) -> None:
+    """|Δω_b| per step of a diverged run on a log scale, with the fitted and the predicted
+    growth (eqs. 22, 23)."""
+    g = run.record["divergence"]
+    c = _cols(run, ["v_breve"])
+    x = c["v_breve"][:, 0:3] @ np.array(g["direction"])
+    d = np.abs(np.diff(x))
+    k = np.arange(d.size)
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    ax.semilogy(k, np.maximum(d, 1e-300), "o-", ms=4, lw=0.8, color="0.3",
+                label="|x_{k+1} − x_k|, x = ω_b along its step direction")
+    k0, k1 = g["fit_steps"]
+    ref = d[k0]
+    kk = np.arange(k0, k1)
+    for factor, style, what in ((g["predicted"], "--", "Φ, simulator's update order"),
+                                (g["predicted_note_order"], ":", "Φ, the note's update order")):
+        ax.semilogy(kk, ref * abs(factor) ** (kk - k0), style, lw=1.2,
+                    label=f"{what}: ×{abs(factor):.4g} per step")
+    ax.axvline(g["first_limit_step"], color="r", lw=0.8,
+               label=f"first limit flag (step {g['first_limit_step']})")
+    ax.set(title=label(f"{run.name}: growth per step {g['growth_factor']:+.4g} (measured)"),
+           xlabel="step k", ylabel="rad/s")
+    ax.legend(fontsize=7, loc="upper left")
     _save(fig, path)
 
 

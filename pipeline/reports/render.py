@@ -63,16 +63,20 @@ def _figure(out: Path, made: list[fg.Figure], skipped: list[str], fig: fg.Figure
 def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], list[str]]:
     made: list[fg.Figure] = []
     skipped: list[str] = []
+    # A diverged run (its analysis has no per-direction stage) gets its own growth figure,
+    # not a place in the others, whose scales its runaway would swamp.
+    diverged = [r for r in runs if r.record.get("status") == "diverged"]
+    runs = [r for r in runs if r not in diverged]
     logged = [r for r in runs if r.log is not None]
-    analysed = [r for r in runs if "directions" in r.record]  # a diverged log has none
+    analysed = [r for r in runs if "directions" in r.record]
     if len(logged) < len(runs):
         skipped.append("time-series figures leave out runs whose log is missing: "
                        + ", ".join(r.name for r in runs if r.log is None))
     global_figs = [
         (fg.Figure("figures/rates.png", "Bus angular rate and camera roll rate",
-                   "‖ω_b‖ over the mission (top) and the camera roll rate v̆[8] over the last "
-                   "second (bottom), per run: on the seed robot the period-2 ripple is in ω_b "
-                   "(the bus yaw), on the servicer in the camera roll."),
+                   "‖ω_b‖ over the mission (top), the bus yaw rate v̆[2] and the camera roll "
+                   "rate v̆[8] over the last second, per run: on the seed robot the period-2 "
+                   "ripple is in ω_b (the bus yaw), on the servicer in the camera roll."),
          lambda p: fg.rates(logged, p), logged),
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
@@ -92,7 +96,16 @@ def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], li
     for fig, draw, inputs in global_figs:
         if inputs:
             _figure(out, made, skipped, fig, draw)
-    for r in runs:
+    for r in diverged:
+        if r.log is None:
+            skipped.append(f"growth of {r.name}: its log is missing")
+            continue
+        fig = fg.Figure(f"figures/growth_{r.folder}.png", f"Divergence of {r.name}",
+                        "The per-step change of ω_b on a log scale until the run was stopped, "
+                        "with the growth Φ's dominant eigenvalue predicts under each update "
+                        "order; the measured slope is the simulator's.")
+        _figure(out, made, skipped, fig, lambda p, r=r: fg.divergence_growth(r, p))
+    for r in [*runs, *diverged]:
         fig = fg.Figure(f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
                         f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} "
                         f"of {r.name}, explicit and imex, against the unit circle.")
