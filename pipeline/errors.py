@@ -21,6 +21,10 @@ class CheckFailed(PipelineError):
     exit_code = 1
 
 
+class LogDamaged(CheckFailed):
+    """A log fails a check against its own metadata: tampered or damaged (exit 1)."""
+
+
 class RunFailed(PipelineError):
     """A mission failed or diverged; its log is written and marked so (exit 1)."""
 

@@ -18,7 +18,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.errors import LogError
+from pipeline.errors import LogDamaged, LogError, SpecError
+from pipeline.spec import Spec, build_spec, canonical_hash, file_hash
 
 VECTOR_COLUMNS = {
     "q": 13, "v": 12, "v_c": 3, "v_breve": 9, "v_breve_des": 9, "x_tilde": 9,
@@ -27,7 +28,13 @@ SCALAR_COLUMNS = (
     "t", "tau", "s_min_G", "kappa_G", "s_min_J", "kappa_J", "gamma", "dt_mu_max",
     "pointing_err_deg", "boresight_err_deg", "com_err", "coverage",
 )
-META_KEYS = ("spec", "spec_hash", "code_version", "robot_file", "robot_hash", "status")
+META_KEYS = ("spec", "spec_hash", "code_version", "robot_file", "robot_hash", "status", "rows",
+             "versions")
+# Columns that may hold +inf: a condition number at an exact singularity (eq. 19). Every other
+# numeric column of a log must be finite.
+MAY_BE_INFINITE = ("kappa_G", "kappa_J")
+# The numerical libraries whose versions a log records (a change may move the last bits).
+LIBRARIES = ("numpy", "scipy", "pinocchio", "numba", "pyarrow")
 ROW_GROUP = 65_536
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -43,6 +50,8 @@ class LogMeta:
     status: str
     failed_step: int | None
     error: str
+    rows: int = -1  # the number of rows written, as the writer counted them
+    versions: dict | None = None  # Python's and the numerical libraries' versions
 
     @property
     def name(self) -> str:
@@ -109,7 +118,24 @@ def log_metadata(meta: LogMeta) -> dict[str, str]:
         "pipeline.status": meta.status,
         "pipeline.failed_step": "" if meta.failed_step is None else str(meta.failed_step),
         "pipeline.error": meta.error,
+        "pipeline.rows": str(meta.rows),
+        "pipeline.versions": json.dumps(meta.versions or library_versions(), sort_keys=True),
     }
+
+
+def library_versions() -> dict[str, str]:
+    """The versions of Python and of the numerical libraries (``LIBRARIES``) in this process."""
+    import importlib.metadata as md
+    import platform
+
+    names = {"pinocchio": "pin"}  # the distribution that provides the module
+    out = {"python": platform.python_version()}
+    for lib in LIBRARIES:
+        try:
+            out[lib] = md.version(names.get(lib, lib))
+        except md.PackageNotFoundError:
+            out[lib] = "absent"
+    return out
 
 
 def _open(path: Path) -> pq.ParquetFile:
@@ -134,9 +160,19 @@ def read_meta(path: Path) -> LogMeta:
     except json.JSONDecodeError:
         raise LogError(f"{path}: metadata key pipeline.spec is not JSON") from None
     failed = md.get("pipeline.failed_step", "")
+    try:
+        rows = int(md["pipeline.rows"])
+        failed_step = int(failed) if failed else None
+        versions = json.loads(md["pipeline.versions"])
+    except (ValueError, json.JSONDecodeError):
+        raise LogError(f"{path}: metadata keys pipeline.rows, pipeline.failed_step or "
+                       f"pipeline.versions are not what the writer writes") from None
+    if not isinstance(spec, dict) or not isinstance(versions, dict):
+        raise LogError(f"{path}: metadata key pipeline.spec or pipeline.versions is not a "
+                       f"mapping")
     return LogMeta(spec, md["pipeline.spec_hash"], md["pipeline.code_version"],
                    md["pipeline.robot_file"], md["pipeline.robot_hash"], md["pipeline.status"],
-                   int(failed) if failed else None, md.get("pipeline.error", ""))
+                   failed_step, md.get("pipeline.error", ""), rows, versions)
 
 
 def num_rows(path: Path) -> int:
@@ -192,3 +228,103 @@ def _concat(chunks: Iterator[dict[str, np.ndarray]], columns: list[str]) -> dict
     if not parts:
         return {c: np.empty((0, VECTOR_COLUMNS[c]) if c in VECTOR_COLUMNS else 0) for c in columns}
     return {c: np.concatenate([p[c] for p in parts]) for c in columns}
+
+
+@dataclass(frozen=True)
+class VerifiedLog:
+    """A log that passed :func:`verify_log`: its metadata and the spec it records."""
+
+    path: Path
+    meta: LogMeta
+    spec: Spec
+
+
+def _damaged(path: Path, check: str, detail: str) -> LogDamaged:
+    return LogDamaged(f"{path}: {check}: {detail} (tampered or damaged; nothing written)")
+
+
+def verify_log(path: Path | str) -> VerifiedLog:
+    """Check a log against its own metadata before anything believes it (DESIGN §6).
+
+    - the metadata spec hashes, canonically, to ``pipeline.spec_hash`` and is a valid spec;
+    - the row count is the recorded one, and fits the status: every step of a ``complete``
+      run, the steps before the failing one of a ``failed`` run, up to and including the
+      divergence step of a ``diverged`` one;
+    - ``step`` is 0, 1, …, n − 1 and ``t`` is step·dt, as the simulator writes them;
+    - the robot file on disk hashes to ``pipeline.robot_hash``: the analysis rebuilds Γ from it;
+    - every numeric column is finite, but the condition numbers (``MAY_BE_INFINITE``), which
+      may be +inf at an exact singularity and never NaN.
+
+    A missing or unreadable file or metadata key is a LogError (exit 2); a failed check is a
+    LogDamaged (exit 1) naming the file, the check and the first offending step. Reads the log
+    by row group: memory stays bounded by one row group.
+    """
+    path = Path(path)
+    meta = read_meta(path)
+    content = {k: v for k, v in meta.spec.items() if k not in ("name", "description")}
+    try:
+        digest = canonical_hash(content)
+    except (TypeError, ValueError):
+        raise _damaged(path, "spec hash", "the metadata spec is not canonical JSON") from None
+    if digest != meta.spec_hash:
+        raise _damaged(path, "spec hash", f"the metadata spec hashes to {digest[:12]}…, the "
+                       f"log records {meta.spec_hash[:12]}…")
+    try:
+        spec = build_spec(str(meta.spec.get("name", path.parent.name)), content, path)
+    except SpecError as exc:
+        raise _damaged(path, "spec", f"the metadata spec is not a valid spec ({exc})") from None
+    n = num_rows(path)
+    expected = {"complete": spec.n_steps,
+                "failed": meta.failed_step, "diverged": None if meta.failed_step is None
+                else meta.failed_step + 1}
+    if meta.status not in expected:
+        raise _damaged(path, "status", f"unknown status {meta.status!r}")
+    if n != meta.rows:
+        raise _damaged(path, "row count", f"{n} rows, the writer recorded {meta.rows}")
+    if expected[meta.status] is None or n != expected[meta.status]:
+        raise _damaged(path, "row count", f"{n} rows for a {meta.status} run (expected "
+                       f"{expected[meta.status]}: {spec.n_steps} steps, failed step "
+                       f"{meta.failed_step})")
+    robot = spec.robot_path
+    if not robot.is_file():
+        raise LogError(f"{path}: its robot file {robot} is not on disk")
+    if file_hash(robot) != meta.robot_hash:
+        raise _damaged(path, "robot file", f"{robot} on disk is not the robot this log was "
+                       f"run with (its hash differs from pipeline.robot_hash)")
+    _check_rows(path, spec.mission.dt)
+    return VerifiedLog(path, meta, spec)
+
+
+def _check_rows(path: Path, dt: float) -> None:
+    """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group."""
+    pf = _open(path)
+    names = [c for c in pf.schema_arrow.names]
+    _check_columns(path, pf, ["step", "t"])
+    offset = 0
+    for rg in range(pf.num_row_groups):
+        t = pf.read_row_group(rg)
+        k = np.arange(offset, offset + t.num_rows)
+        step = t.column("step").to_numpy()
+        bad = np.flatnonzero(step != k)
+        if bad.size:
+            raise _damaged(path, "step column", f"row {k[bad[0]]} holds step {step[bad[0]]}: "
+                           f"steps are not 0, 1, … once each")
+        tt = t.column("t").to_numpy()
+        bad = np.flatnonzero(tt != k * dt)
+        if bad.size:
+            raise _damaged(path, "t column", f"step {k[bad[0]]}: t = {tt[bad[0]]!r}, not "
+                           f"step·dt = {k[bad[0]] * dt!r}")
+        for name in names:
+            col = t.column(name)
+            typ = col.type.value_type if pa.types.is_fixed_size_list(col.type) else col.type
+            if not pa.types.is_floating(typ):
+                continue
+            x = _to_numpy(col, VECTOR_COLUMNS.get(name))
+            ok = (~np.isnan(x) & (x != -np.inf)) if name in MAY_BE_INFINITE else np.isfinite(x)
+            if x.ndim > 1:
+                ok = ok.all(axis=1)
+            bad = np.flatnonzero(~ok)
+            if bad.size:
+                raise _damaged(path, f"column {name}", f"step {k[bad[0]]} is not finite "
+                               f"({x[bad[0]]!r})")
+        offset += t.num_rows

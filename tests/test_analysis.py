@@ -176,8 +176,10 @@ def test_tampered_log_fails_provenance(short_logs, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def _write_variant(src, dst, drop=None, meta=None):
+def _write_variant(src, dst, drop=None, meta=None, rows=None):
     t = pq.read_table(src)
+    if rows is not None:
+        t = t.slice(0, rows)
     md = dict(t.schema.metadata)
     if drop in t.column_names:
         t = t.drop_columns([drop])
@@ -210,8 +212,8 @@ def test_bad_logs_exit_2_with_one_line(short_logs, tmp_path, case, needle):
     elif case == "no_meta":
         path = _write_variant(src, tmp_path / "b" / "run.parquet", drop="pipeline.spec_hash")
     elif case == "failed":
-        path = _write_variant(src, tmp_path / "c" / "run.parquet",
-                              meta={b"pipeline.status": b"failed",
+        path = _write_variant(src, tmp_path / "c" / "run.parquet", rows=12,
+                              meta={b"pipeline.status": b"failed", b"pipeline.rows": b"12",
                                     b"pipeline.failed_step": b"12"})
     else:
         path, extra = src, ["--window-start", "100"]

@@ -14,12 +14,19 @@ import numpy as np
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.errors import CheckFailed, LogError
-from pipeline.logs import iter_columns, num_rows, read_columns, read_meta, require_columns
+from pipeline.logs import (
+    LogMeta,
+    iter_columns,
+    num_rows,
+    read_columns,
+    require_columns,
+    verify_log,
+)
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.svd import batched_singular_values
-from pipeline.spec import Spec, SpecError, build_spec
+from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", *LIMIT_FLAGS]
@@ -31,14 +38,6 @@ class Window:
     start: int
     stop: int
     rule: str
-
-
-def spec_of_log(path, meta) -> Spec:
-    content = {k: v for k, v in meta.spec.items() if k != "name"}
-    try:
-        return build_spec(meta.spec.get("name", path.parent.name), content, path)
-    except SpecError as exc:
-        raise LogError(f"{path}: metadata key pipeline.spec is not a valid spec ({exc})") from None
 
 
 def choose_window(n: int, dt: float, window_start: float | None) -> Window:
@@ -61,13 +60,13 @@ def require_provenance(path, prov: dict) -> None:
 
 def analyze_log(path, window_start: float | None = None, check: bool = True) -> dict:
     """All single-log stages; returns the analysis record (the content of analysis.json)."""
-    meta = read_meta(path)
+    log = verify_log(path)
+    meta, spec = log.meta, log.spec
     if meta.status == "diverged":
-        return divergence_record(path, meta)
+        return divergence_record(path, meta, spec)
     if meta.status != "complete":
         raise LogError(f"{path}: log marked {meta.status} at step {meta.failed_step}: "
                        f"{meta.error}")
-    spec = spec_of_log(path, meta)
     require_columns(path, REQUIRED)
     n = num_rows(path)
     dt = spec.mission.dt
@@ -128,7 +127,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
 GROWTH_FLOOR = 1e-3  # rad/s: a step of ω_b above the smooth motion's (~1e-5) and rounding
 
 
-def divergence_record(path, meta) -> dict:
+def divergence_record(path, meta: LogMeta, spec: Spec) -> dict:
     """The divergence stage, the only one a ``diverged`` log gets (eqs. 22, 23): the growth
     of ω_b per step before the v_max clip, against Φ's dominant eigenvalue.
 
@@ -138,7 +137,6 @@ def divergence_record(path, meta) -> dict:
     the measured factor is exp(slope) of log|d_k| by least squares, negative when d_k
     alternates in sign. Φ (both update orders) is evaluated at the fit's first step.
     """
-    spec = spec_of_log(path, meta)
     require_columns(path, REQUIRED)
     n = num_rows(path)
     robot = GiordanoRobot(spec)

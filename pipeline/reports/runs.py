@@ -15,7 +15,7 @@ from pathlib import Path
 from pipeline.analysis.cli import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.errors import LogError, RunFailed
-from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.logs import LogMeta, num_rows, read_meta, verify_log
 from pipeline.sim.run import log_path, run_spec
 from pipeline.spec import PROJECT_ROOT, Spec
 from pipeline.version import code_version
@@ -23,7 +23,8 @@ from pipeline.version import code_version
 
 @dataclass(frozen=True)
 class RunRecord:
-    """A log ready for analysis and where it came from."""
+    """A verified log ready for analysis and where it came from; ``spec`` is the spec its
+    metadata records (the claims read run parameters from it, never from a spec file)."""
 
     spec: Spec
     path: Path
@@ -60,9 +61,9 @@ def ensure_run(spec: Spec, logs_dir: Path, expect: str = "complete") -> RunRecor
     """The log of ``spec``, reused or run; a run that does not end as ``expect`` (a
     ``complete`` one that diverges, or the reverse) is a RunFailed."""
     path = log_path(spec, logs_dir)
-    meta = reusable(spec, path, expect)
-    if meta is not None:
-        return RunRecord(spec, path, meta, True)
+    if reusable(spec, path, expect) is not None:
+        log = verify_log(path)
+        return RunRecord(log.spec, path, log.meta, True)
     print(f"running {spec.name} ({spec.n_steps} steps) -> {display_path(path)}", file=sys.stderr)
     out = run_spec(spec, logs_dir, progress=sys.stderr.isatty(), raise_on_failure=False)
     if out.status != expect:
@@ -70,7 +71,8 @@ def ensure_run(spec: Spec, logs_dir: Path, expect: str = "complete") -> RunRecor
                         + (f" at {out.error}" if out.error else "") + f"; log: {out.path}")
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    return RunRecord(spec, out.path, read_meta(out.path), False)
+    log = verify_log(out.path)
+    return RunRecord(log.spec, out.path, log.meta, False)
 
 
 def _same_log(record: dict, run: RunRecord) -> bool:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import RunFailed
-from pipeline.logs import LogMeta, log_metadata, write_table
+from pipeline.logs import LogMeta, library_versions, log_metadata, write_table
 from pipeline.sim.mission import Mission
 from pipeline.spec import SPECS_DIR, Spec, file_hash
 from pipeline.version import code_version
@@ -39,6 +39,7 @@ def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
         robot_file=str(spec.robot_path.relative_to(SPECS_DIR.parent)),
         robot_hash=file_hash(spec.robot_path), status=result.status,
         failed_step=result.failed_step, error=result.error,
+        rows=len(result.columns["step"]), versions=library_versions(),
     )
     path = log_path(spec, Path(out_dir))
     write_table(path, result.columns, log_metadata(meta))
