@@ -307,13 +307,13 @@ def _check_rows(path: Path, dt: float) -> None:
         step = t.column("step").to_numpy()
         bad = np.flatnonzero(step != k)
         if bad.size:
-            raise _damaged(path, "step column", f"row {k[bad[0]]} holds step {step[bad[0]]}: "
-                           f"steps are not 0, 1, … once each")
+            raise _damaged(path, "step column", f"row {k[bad[0]]} holds step "
+                           f"{int(step[bad[0]])}: steps are not 0, 1, … once each")
         tt = t.column("t").to_numpy()
         bad = np.flatnonzero(tt != k * dt)
         if bad.size:
-            raise _damaged(path, "t column", f"step {k[bad[0]]}: t = {tt[bad[0]]!r}, not "
-                           f"step·dt = {k[bad[0]] * dt!r}")
+            raise _damaged(path, "t column", f"step {k[bad[0]]}: t = {float(tt[bad[0]])!r}, "
+                           f"not step·dt = {float(k[bad[0]] * dt)!r}")
         for name in names:
             col = t.column(name)
             typ = col.type.value_type if pa.types.is_fixed_size_list(col.type) else col.type
@@ -325,6 +325,5 @@ def _check_rows(path: Path, dt: float) -> None:
                 ok = ok.all(axis=1)
             bad = np.flatnonzero(~ok)
             if bad.size:
-                raise _damaged(path, f"column {name}", f"step {k[bad[0]]} is not finite "
-                               f"({x[bad[0]]!r})")
+                raise _damaged(path, f"column {name}", f"step {k[bad[0]]} is not finite")
         offset += t.num_rows

@@ -78,6 +78,11 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     if check:
         require_provenance(path, prov)
 
+    bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
+    if bad.size:
+        raise CheckFailed(f"{path}: the per-direction projection is not finite at step "
+                          f"{win.start + int(bad[0])} (Γ's SVD failed there)")
+
     # Stage 3: per-direction statistics and the dominant direction.
     lag1 = signals.lag1_autocorrelation(y)
     srms = signals.step_rms(y)
@@ -212,10 +217,14 @@ def rebuild_and_project(robot: GiordanoRobot, path, win: Window
             sigma[keep] = part.sigma
             ys.append(part.y)
             sigmas.append(part.sigma)
+        # A NaN on either side is the worst difference there is, never "no difference".
         diff = np.abs(sigma[:, -1] - chunk["s_min_G"])
+        diff[np.isnan(diff)] = np.inf
         if diff.size and diff.max() > worst:
             worst, worst_step = float(diff.max()), int(chunk["step"][np.argmax(diff)])
-        rel_k = np.abs(sigma[:, 0] / sigma[:, -1] - chunk["kappa_G"]) / chunk["kappa_G"]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rel_k = np.abs(sigma[:, 0] / sigma[:, -1] - chunk["kappa_G"]) / chunk["kappa_G"]
+        rel_k[np.isnan(rel_k)] = np.inf
         worst_kappa = max(worst_kappa, float(rel_k.max(initial=0.0)))
     if not ys:
         raise LogError(f"{path}: no row's step lies in the analysis window "
@@ -346,7 +355,8 @@ def compare(a: dict, b: dict) -> dict:
     la, lb = a["dominant"]["lag1"], b["dominant"]["lag1"]
     return {
         "against": b["spec_name"], "against_log": b["log"],
-        "lag1_flip": bool(np.sign(la) != np.sign(lb)),
+        # NaN flips nothing: the sign of an undefined lag-1 is no evidence.
+        "lag1_flip": bool(np.isfinite(la) and np.isfinite(lb) and np.sign(la) != np.sign(lb)),
         "amplitude_ratio": a["velocity_jump"]["median"] / b["velocity_jump"]["median"],
         "coverage_diff_pp": 100 * abs(a["metrics"]["coverage_final"]
                                       - b["metrics"]["coverage_final"]),

@@ -65,10 +65,14 @@ def compare_logs(pinned: Path, fresh: Path) -> dict:
             notes.append(f"{name}: shape {x.shape} pinned vs {y.shape} new")
             worst, worst_col = float("inf"), name
             continue
-        both_nan = np.isnan(x) & np.isnan(y)
-        d = float(np.max(np.where(both_nan, 0.0, np.abs(x - y)), initial=0.0))
-        if np.isnan(d):
-            d = float("inf")
+        # NaN is a failure, never "no difference": not even a NaN pinned against a NaN.
+        nan = np.isnan(x) | np.isnan(y)
+        if nan.any():
+            row = int(np.flatnonzero(nan.reshape(len(x), -1).any(axis=1))[0])
+            notes.append(f"{name}: NaN at row {row}")
+            worst, worst_col = float("inf"), name
+            continue
+        d = float(np.max(np.abs(x - y), initial=0.0))
         if d > worst:
             worst, worst_col = d, name
     if notes and worst == 0.0:

@@ -1,0 +1,169 @@
+"""Never a confident wrong answer: a log is checked against its own metadata before it is
+believed, and NaN is a failure, never "no difference" (issue 12).
+
+Each tamper or damage class is written from a genuine short log with pyarrow, the way an
+edit by hand or a broken copy would leave it, and must be refused with exit 1 (LogDamaged),
+one line naming the file, the check and the first offending step, and nothing written.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from conftest import run_cli
+
+from pipeline.analysis.stages import analyze_log
+from pipeline.errors import LogDamaged
+from pipeline.logs import MAY_BE_INFINITE, VECTOR_COLUMNS, read_meta, verify_log
+from pipeline.reports.baselines import compare_logs
+from pipeline.sim.run import run_spec
+from pipeline.spec import load_spec, with_overrides
+
+DURATION = 3.0  # s: 100 steps
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory) -> Path:
+    spec = with_overrides(load_spec("nominal"), {"mission.duration": DURATION}, name="t3")
+    return run_spec(spec, tmp_path_factory.mktemp("trust")).path
+
+
+def _rewrite(src: Path, dst: Path, table: pa.Table | None = None,
+             meta: dict[str, str] | None = None) -> Path:
+    t = pq.read_table(src) if table is None else table
+    md = dict(pq.read_schema(src).metadata)
+    md.update({k.encode(): v.encode() for k, v in (meta or {}).items()})
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(t.replace_schema_metadata(md), dst)
+    return dst
+
+
+def _with_nan(t: pa.Table, name: str, row: int) -> pa.Table:
+    col = t.column(name).combine_chunks()
+    if pa.types.is_fixed_size_list(col.type):
+        width = col.type.list_size
+        flat = col.flatten().to_numpy(zero_copy_only=False).copy()
+        flat[row * width + width - 1] = np.nan
+        new = pa.FixedSizeListArray.from_arrays(pa.array(flat), width)
+    else:
+        x = col.to_numpy(zero_copy_only=False).copy()
+        x[row] = np.nan
+        new = pa.array(x)
+    return t.set_column(t.schema.get_field_index(name), name, new)
+
+
+def _edited_dt(src: Path) -> dict[str, str]:
+    spec = read_meta(src).spec
+    spec["mission"]["dt"] = 0.01  # the hash left alone
+    return {"pipeline.spec": json.dumps(spec, sort_keys=True)}
+
+
+def _cases(src: Path, tmp: Path) -> dict[str, tuple[Path, str]]:
+    t = pq.read_table(src)
+    n = t.num_rows
+    wrong_hash = {"pipeline.robot_hash": "0" * 64}
+    return {
+        "metadata edited without rehash": (
+            _rewrite(src, tmp / "a" / "run.parquet", meta=_edited_dt(src)), "spec hash"),
+        "rows removed": (
+            _rewrite(src, tmp / "b" / "run.parquet", t.slice(0, n // 2)), "row count"),
+        "rows removed, count edited": (
+            _rewrite(src, tmp / "c" / "run.parquet", t.slice(0, n // 2),
+                     {"pipeline.rows": str(n // 2)}), "row count"),
+        "rows duplicated": (
+            _rewrite(src, tmp / "d" / "run.parquet", pa.concat_tables([t, t])), "row count"),
+        "a row duplicated in place": (
+            _rewrite(src, tmp / "e" / "run.parquet",
+                     pa.concat_tables([t.slice(0, 10), t.slice(9, n - 10)])),
+            "step column: row 10 holds step 9"),
+        "wrong robot hash": (
+            _rewrite(src, tmp / "f" / "run.parquet", meta=wrong_hash), "robot file"),
+        "t not step·dt": (
+            _rewrite(src, tmp / "g" / "run.parquet", t.set_column(
+                t.schema.get_field_index("t"), "t",
+                pa.array(t.column("t").to_numpy() * 1.5))), "t column: step 1"),
+    }
+
+
+@pytest.mark.parametrize("case", ["metadata edited without rehash", "rows removed",
+                                  "rows removed, count edited", "rows duplicated",
+                                  "a row duplicated in place", "wrong robot hash",
+                                  "t not step·dt"])
+def test_a_tampered_log_is_refused_with_exit_1_and_nothing_written(log, tmp_path, case):
+    path, needle = _cases(log, tmp_path)[case]
+    with pytest.raises(LogDamaged, match="tampered or damaged"):
+        verify_log(path)
+    r = run_cli("analyze", str(path), "--out", str(tmp_path / "out"))
+    assert r.returncode == 1, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and needle in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def _numeric_columns(path: Path) -> list[str]:
+    schema = pq.read_schema(path)
+    out = []
+    for f in schema:
+        typ = f.type.value_type if pa.types.is_fixed_size_list(f.type) else f.type
+        if pa.types.is_floating(typ):
+            out.append(f.name)
+    return out
+
+
+def test_every_numeric_column_is_covered(log):
+    cols = set(_numeric_columns(log))
+    assert {"t", "tau", "s_min_G", "kappa_G", "dt_mu_max", "coverage", *VECTOR_COLUMNS} <= cols
+
+
+def test_a_nan_in_any_numeric_column_is_refused_at_its_step(log, tmp_path):
+    """One NaN at step 37, column by column: each refused, naming the column and the step."""
+    t = pq.read_table(log)
+    for name in _numeric_columns(log):
+        path = _rewrite(log, tmp_path / name / "run.parquet", _with_nan(t, name, 37))
+        needle = ("t column: step 37" if name == "t"  # t = step·dt is checked first
+                  else rf"column {name}: step 37 is not finite")
+        with pytest.raises(LogDamaged, match=needle):
+            verify_log(path)
+
+
+def test_condition_numbers_may_be_inf_but_not_nan_or_minus_inf(log, tmp_path):
+    t = pq.read_table(log)
+    for name in MAY_BE_INFINITE:
+        x = t.column(name).to_numpy().copy()
+        x[5] = np.inf
+        ok = _rewrite(log, tmp_path / f"{name}_inf" / "run.parquet",
+                      t.set_column(t.schema.get_field_index(name), name, pa.array(x)))
+        verify_log(ok)  # +inf: a condition number at an exact singularity
+        x[5] = -np.inf
+        bad = _rewrite(log, tmp_path / f"{name}_minf" / "run.parquet",
+                       t.set_column(t.schema.get_field_index(name), name, pa.array(x)))
+        with pytest.raises(LogDamaged, match=rf"column {name}: step 5"):
+            verify_log(bad)
+
+
+def test_a_genuine_log_passes_and_records_what_the_checks_need(log):
+    v = verify_log(log)
+    assert v.meta.rows == 100 and v.meta.status == "complete"
+    assert set(v.meta.versions) == {"python", "numpy", "scipy", "pinocchio", "numba", "pyarrow"}
+    assert v.spec.mission.duration == DURATION
+
+
+def test_the_analysis_reads_dt_from_the_verified_log_only(log, tmp_path):
+    """The classic tamper of issue 12: dt edited in the metadata (hash left alone) was analysed
+    with exit 0 and dt·μ_max for the wrong dt; now it never reaches the analysis."""
+    path = _rewrite(log, tmp_path / "x" / "run.parquet", meta=_edited_dt(log))
+    with pytest.raises(LogDamaged, match="spec hash"):
+        analyze_log(path)
+
+
+def test_nan_is_never_no_difference_in_the_baselines(log, tmp_path):
+    t = pq.read_table(log)
+    nan = _rewrite(log, tmp_path / "n" / "run.parquet", _with_nan(t, "s_min_G", 3))
+    r = compare_logs(nan, nan)  # NaN against the very same NaN
+    assert r["max_abs_diff"] == np.inf and any("NaN at row 3" in n for n in r["notes"])
+    assert compare_logs(log, log)["max_abs_diff"] == 0.0
