@@ -175,7 +175,7 @@ def test_the_registers_state_the_issue_claims_with_their_thresholds(name):
 NOTE_TOLERANCES = [
     ("C17", "nominal:theory.dt_mu_max", "note:dt_mu_max.nominal", 0.02),
     ("C17", "dt010:theory.dt_mu_max", "note:dt_mu_max.dt010", 0.02),
-    ("C18", "nominal:theory.dt_star", "note:dt_star.nominal", 0.02),
+    ("C18", "nominal:theory.dt_star_damping", "note:dt_star.nominal", 0.02),
     ("C20", "nominal:theory.note_order.eig_dominant.real", "note:eig_dominant.nominal", 0.03),
     ("C21", "nominal:dominant.sigma", "note:ripple_sigma.nominal", 0.15),
     ("C22", "nominal:velocity_jump.median", "note:velocity_jump.nominal", 0.25),

@@ -169,8 +169,10 @@ def test_mechanism_report_numbers_come_from_analysis_json():
     rec = json.loads((b.reports / "t_nominal" / "analysis.json").read_text())
     md = (b.reports / "t_nominal" / "mechanism.md").read_text()
     assert "Period-2 instability" in md
-    for value in (rec["dominant"]["lag1"], rec["theory"]["dt_mu_max"], rec["theory"]["dt_star"],
-                  rec["alignment"]["abs_cos"], rec["comparison"]["amplitude_ratio"]):
+    th = rec["theory"]
+    for value in (rec["dominant"]["lag1"], th["dt_mu_max"], th["dt_star_damping"],
+                  th["dt_star_map"], rec["alignment"]["abs_cos"],
+                  rec["comparison"]["amplitude_ratio"]):
         assert f"{value:.4g}" in md
     for row in rec["comparison"]["table"]:
         assert row["quantity"].replace("|", "\\|") in md

@@ -163,7 +163,7 @@ def test_four_points_then_nothing_reruns_then_only_what_is_missing(tmp_path):
     assert t1["ran"].all() and t1["analysed"].all()
     assert sorted(zip(t1["mission.dt"], t1["controller.gains.cam_ori.D"], strict=True)) == [
         (0.02, 1.0), (0.02, 1.5), (0.03, 1.0), (0.03, 1.5)]
-    assert t1[["dominant_lag1", "dt_mu_max", "dt_star", "eig_real", "spectral_radius"]
+    assert t1[["dominant_lag1", "dt_mu_max", "dt_star_damping", "eig_real", "spectral_radius"]
               ].notna().all().all()
     # dt·μ_max is linear in dt at fixed gains
     d1 = t1[t1["controller.gains.cam_ori.D"] == 1.0].sort_values("mission.dt")["dt_mu_max"]
@@ -395,7 +395,7 @@ def test_slurm_job_script(tmp_path):
 def _dt_table(dts, lags, stars, status=None):
     return pd.DataFrame({"point": [f"p{i}" for i in range(len(dts))], "mission.dt": dts,
                          "status": status or ["complete"] * len(dts),
-                         "dominant_lag1": lags, "dt_star": stars})
+                         "dominant_lag1": lags, "dt_star_damping": stars})
 
 
 def test_stability_bracket():

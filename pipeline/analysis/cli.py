@@ -26,6 +26,10 @@ def write_analysis(record: dict, out_dir: Path) -> Path:
     return path
 
 
+def _num(x: float | None) -> str:
+    return "none" if x is None else f"{x:.4g}"
+
+
 def analyze_command(log: Path, against: Path | None, out: Path,
                     window_start: float | None = None) -> int:
     record = analyze_log(log, window_start)
@@ -45,7 +49,8 @@ def analyze_command(log: Path, against: Path | None, out: Path,
     path = write_analysis(record, out)
     th, dom = record["theory"], record["dominant"]
     print(f"{record['spec_name']}: dominant lag-1 {dom['lag1']:+.3f} (σ {dom['sigma']:.3g}), "
-          f"dt·μ_max {th['dt_mu_max']:.3g}, dt* {th['dt_star']:.4g} s, dominant eigenvalue "
+          f"dt·μ_max {th['dt_mu_max']:.3g}, dt*_damping {th['dt_star_damping']:.4g} s, "
+          f"dt*_map {_num(th['dt_star_map'])} s, dominant eigenvalue "
           f"{th['eig_dominant']['real']:+.3f}{th['eig_dominant']['imag']:+.3f}j, "
           f"|cos| {record['alignment']['abs_cos']:.3f}, median ‖Δv‖ "
           f"{record['velocity_jump']['median']:.3g}, provenance "

@@ -1,8 +1,11 @@
 """The analysis of one log (DESIGN §3): stages 1–6, and stage 7 for a pair of logs.
 
 Window rule: the analysis window is [window_start, end) with window_start = half the mission
-by default, so start-up transients are excluded; theory is evaluated at the representative
-step, the step of the window where the logged s_min_G is smallest (closest to singular).
+by default, so start-up transients are excluded. Theory is evaluated at the representative
+step (:func:`representative_step`): the step of median s_min_G among the window's steps whose
+s_min_J is at or above the damped inverse's floor, where Γ⁻¹ is exact and M̆ is the robot's
+reduced inertia; below the floor the damping distorts M̆, so such steps are counted and
+reported, not used.
 """
 
 from __future__ import annotations
@@ -50,6 +53,37 @@ def choose_window(n: int, dt: float, window_start: float | None) -> Window:
     return Window(start, n, f"from {window_start:g} s to the end")
 
 
+@dataclass(frozen=True)
+class Representative:
+    """The representative step of a window (its index in the window) and how it was found."""
+
+    index: int
+    rule: str
+    below_floor: int  # window steps with s_min_J below the damped inverse's floor
+    above_floor: bool  # whether the chosen step is at or above it
+
+
+def representative_step(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float
+                        ) -> Representative:
+    """The step of median s_min_G among the window's steps with s_min_J ≥ floor (the lower
+    median for an even count, so it is a step of the window). If every step lies below the
+    floor, the median over all of them, flagged: the theory there uses a damped M̆."""
+    ok = s_min_J >= floor
+    below = int(np.count_nonzero(~ok))
+    pool = np.flatnonzero(ok) if ok.any() else np.arange(s_min_G.size)
+    order = pool[np.argsort(s_min_G[pool], kind="stable")]
+    k = int(order[(order.size - 1) // 2])
+    if ok.any():
+        rule = (f"step of median s_min_G among the window's {ok.sum()} steps with s_min_J ≥ "
+                f"the damped inverse's floor {floor:g}" + (f" ({below} steps below it "
+                                                             f"left out)" if below else ""))
+    else:
+        rule = (f"every one of the window's {below} steps has s_min_J below the damped "
+                f"inverse's floor {floor:g}: step of median s_min_G over all of them, where "
+                f"M̆ is distorted by the damping")
+    return Representative(k, rule, below, bool(ok.any()))
+
+
 def require_provenance(path, prov: dict) -> None:
     """CheckFailed unless σ_min of the rebuilt Γ matches the logged s_min_G on every step."""
     if prov["max_abs_s_min_G"] > PROVENANCE_TOL:
@@ -94,11 +128,12 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     ]
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
-    cols = read_columns(path, [c for c in REQUIRED
-                               if c not in ("q", "x_tilde", "kappa_G", "s_min_J")],
+    cols = read_columns(path, [c for c in REQUIRED if c not in ("q", "x_tilde", "kappa_G")],
                         win.start, win.stop)
-    rep = win.start + int(np.argmin(cols["s_min_G"]))
-    th = theory_at_step(robot, spec, path, rep)
+    rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
+    th = theory_at_step(robot, spec, path, win.start + rep.index)
+    th["record"].update(rule=rep.rule, window_steps_below_floor=rep.below_floor,
+                        at_or_above_floor=rep.above_floor)
     card = robot.card(th["q"])
 
     # Stages 5 and 6: alignment of theory and data directions, per-step velocity jump.
@@ -257,10 +292,12 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit")
     record = {
-        "rule": "step of the window with the smallest logged s_min_G",
+        "rule": "the given step",
         "step": k, "t": k * dt, "s_min_G": T.s_min_G, "gamma": gamma,
         "mu": mu.tolist(), "mu_max": float(mu[-1]), "dt_mu_max": float(dt * mu[-1]),
-        "dt_star": theory.critical_step(mu[-1]), "dt_star_bisection": dt_bis,
+        # Two critical steps (eq. 24): the damping-only bound 2/μ_max, and the map's, where
+        # the spectral radius of Φ (stiffness included, explicit) reaches 1.
+        "dt_star_damping": theory.critical_step(mu[-1]), "dt_star_map": dt_bis,
         "regime": theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
         "rho_modes": theory.amplification(dt, mu, integ).tolist(),
         "eig_dominant": {"real": own.dominant.real, "imag": own.dominant.imag},
@@ -330,7 +367,8 @@ COMPARE_ROWS = (
     ("dominant lag-1", ("dominant", "lag1")),
     ("dominant direction σ", ("dominant", "sigma")),
     ("dt·μ_max", ("theory", "dt_mu_max")),
-    ("dt* = 2/μ_max (s)", ("theory", "dt_star")),
+    ("dt*_damping = 2/μ_max (s)", ("theory", "dt_star_damping")),
+    ("dt*_map: spectral radius of Φ reaches 1 (s)", ("theory", "dt_star_map")),
     ("discrete-map dominant eigenvalue (real)", ("theory", "eig_dominant", "real")),
     ("discrete-map dominant eigenvalue (imag)", ("theory", "eig_dominant", "imag")),
     ("spectral radius", ("theory", "spectral_radius")),

@@ -102,7 +102,7 @@ class SweepRef(_Strict):
     workers: int = Field(default=2, gt=0)
     key: str = "mission.dt"
     lag: str = "dominant_lag1"
-    predicted: str = "dt_star"
+    predicted: str = "dt_star_damping"
 
 
 class ClaimsFile(_Strict):

@@ -217,9 +217,9 @@ def sweep_map(table: Path, path: Path) -> str | None:
                 label="dt·μ_max < 2")
         ax.plot(df["mission.dt"][unstable], df[col][unstable], "s", color="tab:red",
                 label="dt·μ_max > 2")
-        if "dt_star" in df and df["dt_star"].notna().any():
-            ax.axvline(float(df["dt_star"].median()), color="k", ls="--", lw=0.8,
-                       label=f"dt* = {float(df['dt_star'].median()):.4g} s")
+        if "dt_star_damping" in df and df["dt_star_damping"].notna().any():
+            ax.axvline(float(df["dt_star_damping"].median()), color="k", ls="--", lw=0.8,
+                       label=f"dt*_damping = {float(df['dt_star_damping'].median()):.4g} s")
         ax.set(title=ttl, xlabel="mission.dt (s)")
     a2.axhline(2.0, color="r", lw=0.8)
     a1.legend(fontsize=7)

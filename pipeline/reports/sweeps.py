@@ -39,7 +39,7 @@ def _fresh(table: Path, plan) -> bool:
 
 def ensure_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
                  workers: int = 2, key: str = "mission.dt", lag: str = "dominant_lag1",
-                 predicted: str = "dt_star") -> tuple[dict, dict]:
+                 predicted: str = "dt_star_damping") -> tuple[dict, dict]:
     """The stability bracket of the sweep and its provenance, running the sweep if needed."""
     plan = plan_sweep(spec, sets, name, logs, out)
     if not _fresh(plan.table_path, plan):

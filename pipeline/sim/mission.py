@@ -25,6 +25,7 @@ from tqdm import tqdm
 from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
+from pipeline.sim.breve_controller import damping_rates
 from pipeline.sim.control_step import (
     CONTROLLER_FIELDS,
     ROW,
@@ -38,6 +39,7 @@ from pipeline.sim.control_step import (
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
+from pipeline.sim.stability import bisect_critical_step, critical_step, posture_stiffness
 from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
 
@@ -126,6 +128,20 @@ class Mission:
         v0 = T0.gamma_inv @ np.concatenate([v_c0, np.zeros(9)])
         return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(9))
 
+    def critical_steps(self, s: LoopState) -> tuple[float, float | None]:
+        """(dt*_damping, dt*_map) at state ``s`` for the spec's integrator (eq. 24): 2/μ_max,
+        and the step at which the spectral radius of the map Φ (stiffness included) reaches 1
+        (None if none below 1 s). The online guard evaluates them once, at the start."""
+        robot, ctrl = self.robot, self.spec.controller
+        T = robot.terms(s.q, s.v)
+        gamma = conditioning_scale(T.s_min_G, ctrl)
+        J_x = task_errors(T, self.guidance.reference(s.tau, T.p_b), gamma, s.v_c).J_x
+        K, D = block_gains(ctrl, gamma)
+        K_x = J_x.T @ K + posture_stiffness(T.gamma_inv, ctrl.gains.posture, J_x)
+        M = T.reduced_inertia
+        mu_max = float(damping_rates(M, D)[-1])
+        return critical_step(mu_max), bisect_critical_step(M, D, K_x, J_x, ctrl.integrator)
+
     def controller_vector(self) -> np.ndarray:
         """The spec's controller and the robot's constants as the step kernel reads them
         (``CONTROLLER_FIELDS``); built per run, so a changed ``robot.q_bar`` is honoured."""
@@ -188,8 +204,14 @@ class Mission:
                                     "v_breve": s0.v_breve, "integral": s0.integral})
         ctrl = self.controller_vector()
         coverage = CoverageCounter(self.target, self.spec.camera)
-        guard = self.spec.controller.integrator == "explicit"
+        explicit = self.spec.controller.integrator == "explicit"
         warned: list[str] = []
+        # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
+        # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
+        dt_damping, dt_map = self.critical_steps(s0)
+        if dt_map is not None and self.dt >= dt_map:
+            warned.append(map_warning(self.dt, dt_map, dt_damping,
+                                      self.spec.controller.integrator))
         clipped = 0
         # Overflow shows as a non-finite state, caught below at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
@@ -204,7 +226,7 @@ class Mission:
                 if not finite:
                     cols = log_columns(rows[:k], self.dt)
                     return MissionResult(cols, "failed", k, f"step {k}: {why}", warned)
-                if guard and not warned and rows[k, _DT_MU] > 2:
+                if explicit and not warned and rows[k, _DT_MU] > 2:
                     warned.append(stability_warning(k, float(rows[k, _DT_MU]), self.dt))
                 clipped = clipped + 1 if rows[k, _SAT_V_MAX] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
@@ -237,6 +259,17 @@ def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) 
     return (f"step {step}: the velocity stayed on the v_max clip for {DIVERGENCE_STEPS} "
             f"consecutive steps; dt·μ_max = {dt_mu_max:.3g}, dt* = 2/μ_max = {dt_star:.4g} s. Fix: "
             f"{fix}= {dt_star:.4g} s")
+
+
+def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str) -> str:
+    """The online guard's message when mission.dt is past the map's critical step (eq. 24)."""
+    fix = ("set controller.integrator: imex, or mission.dt below" if integrator == "explicit"
+           else "set mission.dt below")
+    return (f"step 0: mission.dt = {dt:.4g} s is at or above the critical step dt*_map = "
+            f"{dt_map:.4g} s (the spectral radius of the discrete map Φ, stiffness included, "
+            f"reaches 1; the damping-only bound dt*_damping = 2/μ_max = {dt_damping:.4g} s) "
+            f"under the {integrator} integrator: the loop is unstable. Fix: {fix} "
+            f"{dt_map:.4g} s")
 
 
 def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:

@@ -86,7 +86,7 @@ def summary_text(df: pd.DataFrame, keys: list[str], path: Path) -> str:
 
 
 def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "mission.dt",
-                      lag: str = "dominant_lag1", predicted: str = "dt_star") -> dict:
+                      lag: str = "dominant_lag1", predicted: str = "dt_star_damping") -> dict:
     """Where the measured lag-1 (column ``lag``) changes sign along ``key``, against the
     predicted crossing (column ``predicted``, in ``key`` units): by default the dominant
     lag-1 along mission.dt against dt* = 2/μ_max.
