@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-from pipeline.analysis.cli import write_analysis
+from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.reports.render import render_all
 from pipeline.sim.run import run_spec

@@ -279,3 +279,22 @@ def test_the_shipped_note_publishes_the_issue_values():
         assert note.value(key, col) == v, (key, col)
     with pytest.raises(SpecError, match="publishes no"):
         note.value("abs_cos", "nominal")  # the note's alignment row has no number
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("claims:\n  - {id: C1, statement: s, expect: hold, checks: "
+     "[{metric: 'nominal:dominant.lag1', op: lt, threshold: .nan}]}\n",
+     "threshold nan is not a finite number"),
+    ("claims:\n  - {id: C1, statement: s, expect: hold, checks: "
+     "[{metric: 'nominal:dominant.lag1', op: lt, threshold: -.inf}]}\n",
+     "threshold -inf is not a finite number"),
+    ("logs: a\nlogs: b\nclaims: []\n", "duplicate key 'logs'"),
+    ("", "is empty"),
+])
+def test_bad_claims_files_are_one_line_spec_errors(tmp_path, text, needle):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        load_claims(path)
+    r = run_cli("claims", "--claims", str(path), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1

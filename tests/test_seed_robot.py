@@ -316,7 +316,7 @@ def test_note_table_puts_the_note_beside_our_values():
 def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
     """A diverged log's analysis is listed with its growth and drawn in its own figure; it is
     kept out of the figures its runaway would swamp."""
-    from pipeline.analysis.cli import write_analysis
+    from pipeline.analysis.record import write_analysis
     from pipeline.analysis.stages import compare
     from pipeline.reports.render import render_all
 

@@ -61,6 +61,13 @@ BAD_SPECS: dict[str, tuple[dict[str, str], str, tuple[str, ...]]] = {
     "missing_parent": ({"s.yaml": "extends: no_such_parent\n"}, "s.yaml", ("no_such_parent",)),
     "missing_file": ({}, "absent.yaml", ("absent.yaml", "not found")),
     "missing_name": ({}, "NAME:no_such_spec", ("no_such_spec",)),
+    "duplicate_key": ({"s.yaml": "extends: nominal\nmission: {dt: 0.03}\nmission: {dt: 0.01}\n"},
+                      "s.yaml", ("s.yaml", "duplicate key 'mission'", "line")),
+    "duplicate_nested_key": ({"s.yaml": "extends: nominal\nmission:\n  dt: 0.03\n  dt: 0.01\n"},
+                             "s.yaml", ("duplicate key 'dt'",)),
+    "empty_spec": ({"s.yaml": ""}, "s.yaml", ("s.yaml", "empty")),
+    "comment_only_spec": ({"s.yaml": "# nothing here\n"}, "s.yaml", ("s.yaml", "empty")),
+    "binary_spec": ({"s.yaml": b"\xff\xfe\x00\x01PK"}, "s.yaml", ("s.yaml", "not UTF-8")),
 }
 
 
@@ -74,7 +81,10 @@ SUBPROCESS_CASES = ("unknown_key", "wrong_type_dt", "zero_dt", "nan_dt", "inf_ga
 def _write_case(case: str, d: Path) -> tuple[str, Path]:
     files, target, _ = BAD_SPECS[case]
     for fname, text in files.items():
-        (d / fname).write_text(text)
+        if isinstance(text, bytes):
+            (d / fname).write_bytes(text)
+        else:
+            (d / fname).write_text(text)
     arg = target.removeprefix("NAME:") if target.startswith("NAME:") else str(d / target)
     return arg, d / "out"
 
@@ -182,6 +192,15 @@ def test_canonical_hash_of_plain_mappings():
     assert canonical_hash({"y": [1, 2]}) != canonical_hash({"y": [2, 1]})  # lists keep order
     with pytest.raises(ValueError):
         canonical_hash({"x": float("nan")})
+
+
+def test_exponent_numbers_are_floats_as_yaml_1_2_reads_them(tmp_path):
+    """`dt: 1e-2` was a string to PyYAML (YAML 1.1) and refused; YAML 1.2 reads a float,
+    the same value `--set mission.dt=1e-2` gives."""
+    (tmp_path / "e.yaml").write_text("extends: nominal\nmission: {dt: 1e-2}\n")
+    spec = load_spec(tmp_path / "e.yaml")
+    assert spec.mission.dt == 0.01
+    assert spec.spec_hash == with_overrides(load_spec("nominal"), {"mission.dt": 0.01}).spec_hash
 
 
 def test_hash_int_and_float_spelling_agree():

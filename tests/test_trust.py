@@ -167,3 +167,72 @@ def test_nan_is_never_no_difference_in_the_baselines(log, tmp_path):
     r = compare_logs(nan, nan)  # NaN against the very same NaN
     assert r["max_abs_diff"] == np.inf and any("NaN at row 3" in n for n in r["notes"])
     assert compare_logs(log, log)["max_abs_diff"] == 0.0
+
+
+# -- reports refuse what they cannot render (issue 12, item 5) ---------------------------------
+
+@pytest.fixture(scope="module")
+def analysed(log, tmp_path_factory) -> Path:
+    from pipeline.analysis.record import write_analysis
+
+    out = tmp_path_factory.mktemp("analysed")
+    write_analysis(analyze_log(log), out)
+    return out
+
+
+def _copy_reports(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+@pytest.mark.parametrize("damage,needle", [
+    (lambda p: p.write_text('{"schema": "breve-analysis/1", "spec_name": "t3"'), "not JSON"),
+    (lambda p: p.write_text(json.dumps({**json.loads(p.read_text()), "schema": "v0"})),
+     "key schema"),
+    (lambda p: p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items()
+                                        if k != "theory"})), "key theory missing"),
+    (lambda p: (p.parent / "directions.parquet").unlink(), "directions.parquet is missing"),
+    (lambda p: (p.parent / "directions.parquet").write_bytes(b"PAR1 another table"),
+     "key directions_sha256"),
+])
+def test_report_refuses_a_damaged_analysis_with_exit_2(analysed, tmp_path, damage, needle):
+    out = _copy_reports(analysed, tmp_path / "rep")
+    damage(out / "t3" / "analysis.json")
+    r = run_cli("report", "--out", str(out))
+    assert r.returncode == 2, r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert "analysis.json" in line and needle in line, line
+    assert not (out / "index.html").exists()
+
+
+def test_report_refuses_an_empty_or_missing_folder(tmp_path):
+    (tmp_path / "empty").mkdir()
+    r = run_cli("report", "--out", str(tmp_path / "empty"))
+    assert r.returncode == 2 and "nothing to report" in r.stderr
+    r = run_cli("report", "--out", str(tmp_path / "typo"))
+    assert r.returncode == 2 and "report folder not found" in r.stderr
+    assert not (tmp_path / "typo").exists()
+
+
+def test_report_removes_the_outputs_of_a_run_that_is_gone(analysed, tmp_path):
+    from pipeline.reports.render import render_all
+
+    out = _copy_reports(analysed, tmp_path / "rep")
+    (out / "gone").mkdir()
+    for name in ("mechanism.md", "mechanism.html"):
+        (out / "gone" / name).write_text("an old report of a run without analysis")
+    (out / "figures").mkdir()
+    (out / "figures" / "eig_gone.png").write_bytes(b"old")
+    render_all(out)
+    assert not (out / "gone" / "mechanism.md").exists()
+    assert not (out / "figures" / "eig_gone.png").exists()
+    assert (out / "figures" / "eig_t3.png").is_file()
+
+
+def test_analysis_files_are_a_pair(analysed):
+    from pipeline.analysis.record import SCHEMA, read_analysis
+
+    rec = read_analysis(analysed / "t3" / "analysis.json")
+    assert rec["schema"] == SCHEMA and len(rec["directions_sha256"]) == 64

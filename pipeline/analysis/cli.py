@@ -2,28 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import numpy as np
-
+from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_text, write_table
-
-
-def write_analysis(record: dict, out_dir: Path) -> Path:
-    """Write ``out_dir/<spec name>/analysis.json`` and ``directions.parquet`` atomically."""
-    folder = Path(out_dir) / record["spec_name"]
-    if record.get("directions"):
-        table = {k: np.array([d[k] for d in record["directions"]])
-                 for k in record["directions"][0]}
-        write_table(folder / "directions.parquet", table, {"pipeline.log": record["log"]})
-    else:  # a diverged log has no per-direction stage: no stale table of an older run
-        (folder / "directions.parquet").unlink(missing_ok=True)
-    path = folder / "analysis.json"
-    atomic_write_text(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
-    return path
 
 
 def _num(x: float | None) -> str:

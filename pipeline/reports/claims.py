@@ -21,6 +21,7 @@ from pipeline.analysis.signals import lag1_autocorrelation
 from pipeline.errors import SpecError
 from pipeline.logs import atomic_write_text, read_columns
 from pipeline.reports.claims_file import (
+    CLAIMS_SCHEMA,
     LOG_GROUPS,
     OPERATORS,
     Claim,
@@ -267,7 +268,8 @@ def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
                       for s in ("PASS", "FAIL", "OPEN", "NOW HOLDS")}}
     md = render("claims.md.j2", Path(out_dir) / "CLAIMS.md", **ctx)
     render("claims.html.j2", Path(out_dir) / "CLAIMS.html", **ctx)
-    data = {"claims_file": ctx["claims_file"], "code_version": ctx["code_version"],
+    data = {"schema": CLAIMS_SCHEMA, "claims_file": ctx["claims_file"],
+            "code_version": ctx["code_version"],
             "claims": [{"id": r.claim.id, "statement": r.claim.statement,
                         "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,

@@ -25,16 +25,17 @@ with it). A run expected to diverge says ``expect: diverged``. A file may ``exte
 
 from __future__ import annotations
 
+import math
 import operator
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.errors import SpecError
 from pipeline.spec import deep_merge
+from pipeline.yamlfile import read_yaml
 
 
 def _abs(f: Callable[[float, float], bool]) -> Callable[[Any, Any], bool]:
@@ -48,6 +49,7 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
     "abs_gt": (_abs(operator.gt), "|·| >"), "abs_ge": (_abs(operator.ge), "|·| ≥"),
     "close": (lambda a, b: True, "≈"),  # with rel_tol: see compare_values in claims.py
 }
+CLAIMS_SCHEMA = "breve-claims/1"  # the version of the claims.json the register writes
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
 FIXED_SOURCES = ("cross_check", "baselines", "sweep", "note")
 LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
@@ -64,6 +66,13 @@ class ClaimCheck(_Strict):
     op: str
     threshold: Any = None
     rel_tol: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _finite_threshold(self) -> ClaimCheck:
+        t = self.threshold
+        if isinstance(t, float) and not math.isfinite(t):
+            raise ValueError(f"threshold {t!r} is not a finite number")
+        return self
 
     @property
     def threshold_metric(self) -> str | None:
@@ -125,16 +134,9 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     path = path.resolve()
     if path in chain:
         raise SpecError(f"{path}: cycle in extends")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise SpecError(f"{path}: claims file not found") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise SpecError(f"{path}: broken YAML{where}") from None
-    if not isinstance(data, dict):
-        raise SpecError(f"{path}: a claims file must be a mapping")
+    if not path.is_file():
+        raise SpecError(f"{path}: claims file not found")
+    data = read_yaml(path, "claims file")
     parent = data.pop("extends", None)
     if parent is None:
         return data

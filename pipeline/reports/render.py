@@ -8,16 +8,18 @@ with the claims register, baselines, benchmark and sweep pages when they exist.
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from pipeline.analysis.record import read_analysis
 from pipeline.errors import LogError
 from pipeline.logs import read_meta
 from pipeline.reports import figures as fg
+from pipeline.reports.claims_file import CLAIMS_SCHEMA
 from pipeline.reports.cross_check import write_cross_check
 from pipeline.reports.mechanism import mechanism_context
-from pipeline.reports.runs import load_analysis
 from pipeline.reports.templating import render
 from pipeline.spec import PROJECT_ROOT
 from pipeline.version import code_version
@@ -32,11 +34,11 @@ def _log_of(record: dict) -> Path | None:
 
 
 def load_runs(out: Path) -> list[fg.RunData]:
+    """Every ``<out>/<run>/analysis.json``, read whole or refused (LogError naming the file and
+    the key, exit 2): a damaged record is never dropped in silence."""
     runs = []
     for path in sorted(Path(out).glob("*/analysis.json")):
-        rec = load_analysis(path)
-        if not rec or "spec_name" not in rec:
-            continue
+        rec = read_analysis(path)
         log = _log_of(rec)
         spec: dict = {}
         if log is not None:
@@ -130,11 +132,47 @@ def _existing(out: Path, *names: str) -> list[str]:
     return [n for n in names if (out / n).is_file()]
 
 
+def read_claims_json(path: Path) -> dict | None:
+    """The claims register's ``claims.json``, None if there is none; LogError if it is
+    damaged or of a schema this code does not read."""
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise LogError(f"{path}: not a readable claims record ({exc})") from None
+    if not isinstance(data, dict) or data.get("schema") != CLAIMS_SCHEMA:
+        got = data.get("schema") if isinstance(data, dict) else None
+        raise LogError(f"{path}: key schema: {got!r} is not a version this code reads "
+                       f"({CLAIMS_SCHEMA})")
+    if not isinstance(data.get("claims"), list):
+        raise LogError(f"{path}: key claims missing")
+    return data
+
+
+def _remove_stale(out: Path, keep: set[Path]) -> None:
+    """Reports of runs that no longer have an analysis, and figures not drawn this time."""
+    stale = [p for p in out.glob("*/mechanism.*") if p not in keep]
+    stale += [p for p in (out / "figures").glob("*.png") if p not in keep]
+    for p in stale:
+        p.unlink(missing_ok=True)
+
+
 def render_all(out: Path) -> list[Path]:
-    """Render every report into ``out``; returns the files written (index first)."""
+    """Render every report into ``out``; returns the files written (index first).
+
+    Refuses (exit 2) a folder that does not exist or holds nothing to report, and a damaged
+    analysis.json or claims.json; removes the reports and figures of runs that are gone."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if not out.is_dir():
+        raise LogError(f"{out}: report folder not found (run `make all` or `python -m "
+                       f"pipeline analyze LOG --out {out}` first)")
     runs = load_runs(out)
+    claims = read_claims_json(out / "claims.json")
+    sweep_tables = list(out.glob("sweeps/*/sweep.parquet"))
+    if not runs and claims is None and not sweep_tables:
+        raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json or "
+                       f"sweeps/*/sweep.parquet")
     figs, skipped = make_figures(out, runs)
     fig_files = {f.file for f in figs}
     cc = write_cross_check(out)
@@ -149,7 +187,7 @@ def render_all(out: Path) -> list[Path]:
                     render("mechanism.html.j2", folder / "mechanism.html", **ctx)]
         mechanisms.append({"run": r, "verdict": ctx["verdict"], "against": ctx["names"][1],
                            "eig": f"figures/eig_{r.folder}.png" in fig_files})
-    claims = load_analysis(out / "claims.json")
+    _remove_stale(out, {*written, *(out / f.file for f in figs)})
     pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "baselines.md", "baselines.json",
                       "bench.md", "bench.json", "ci/CLAIMS.html", "ci/CLAIMS.md")
     sweeps = sorted(p.relative_to(out).as_posix() for p in out.glob("sweeps/*/*.md"))

@@ -7,12 +7,11 @@ from that same log (path, spec hash, code version) and against the same second l
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.analysis.cli import write_analysis
+from pipeline.analysis.record import try_read_analysis, write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.errors import LogError, RunFailed
 from pipeline.logs import LogMeta, num_rows, read_meta, verify_log
@@ -81,18 +80,11 @@ def _same_log(record: dict, run: RunRecord) -> bool:
             and record.get("code_version") == run.meta.code_version)
 
 
-def load_analysis(path: Path) -> dict | None:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
-
-
 def ensure_analysis(run: RunRecord, out_dir: Path, against: RunRecord | None = None,
                     against_record: dict | None = None) -> dict:
     """The analysis record of ``run`` (compared with ``against``), reused or recomputed."""
     path = Path(out_dir) / run.spec.name / "analysis.json"
-    old = load_analysis(path)
+    old = try_read_analysis(path)  # a cache: a damaged or foreign record is recomputed
     if old is not None and _same_log(old, run):
         comp = old.get("comparison")
         if against is None and comp is None:

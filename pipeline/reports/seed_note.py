@@ -12,11 +12,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.errors import SpecError
 from pipeline.spec import SPECS_DIR
+from pipeline.yamlfile import read_yaml
 
 COLUMNS = ("nominal", "dt010")
 NOTE_FILE = SPECS_DIR / "seed_note.yaml"  # the mechanism reports' note
@@ -60,14 +60,7 @@ class SeedNote(_Strict):
 def load_note(path: Path | str) -> SeedNote:
     """Read and validate the note file; every error is one line naming the file."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise SpecError(f"{path}: cannot read the note file: {exc.strerror}") from None
-    except yaml.YAMLError:
-        raise SpecError(f"{path}: broken YAML") from None
-    if not isinstance(data, dict):
-        raise SpecError(f"{path}: the note file must be a mapping")
+    data = read_yaml(path, "note file")
     try:
         note = SeedNote.model_validate({**data, "source": str(path)})
     except ValidationError as exc:

@@ -15,10 +15,9 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-import yaml
-
 from pipeline.errors import SpecError
 from pipeline.spec import Spec, with_overrides
+from pipeline.yamlfile import parse_scalar
 
 _KEY_RE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 _SAFE_RE = re.compile(r"^[A-Za-z0-9_.=+\-]+$")
@@ -53,18 +52,9 @@ def split_values(text: str) -> list[str]:
 
 
 def parse_value(text: str) -> Any:
-    """A YAML scalar (``0.01`` float, ``20`` int, ``imex`` string, ``[0, 1]`` list);
-    exponent forms YAML 1.1 reads as strings (``1e300``) are read as floats."""
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
+    """A YAML 1.2 scalar, as in a spec file (``0.01`` and ``1e-2`` floats, ``20`` int,
+    ``imex`` string, ``[0, 1]`` list)."""
+    return parse_scalar(text)
 
 
 def parse_sets(sets: list[str]) -> list[tuple[str, list[Any]]]:

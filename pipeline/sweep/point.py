@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import errno
 import fcntl
-import json
 import math
 import os
 import socket
@@ -28,6 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+from pipeline.analysis.record import try_read_analysis
 from pipeline.errors import LogError, PipelineError
 from pipeline.logs import LogMeta, num_rows, read_meta
 from pipeline.spec import Spec
@@ -77,8 +77,10 @@ def cached_analysis(path: Path, log: Path, meta: LogMeta) -> dict | None:
     try:
         if path.stat().st_mtime_ns < log.stat().st_mtime_ns:
             return None
-        record = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except OSError:
+        return None
+    record = try_read_analysis(path)
+    if record is None:
         return None
     if record.get("spec_hash") != meta.spec_hash or record.get("code_version") != meta.code_version:
         return None
@@ -145,7 +147,7 @@ def figures(analysis: dict | None) -> dict[str, float]:
 
 def run_point(spec: Spec, root: str) -> dict:
     """The Dask task of one point (see the module docstring); returns a small record."""
-    from pipeline.analysis.cli import write_analysis
+    from pipeline.analysis.record import write_analysis
     from pipeline.analysis.stages import analyze_log
     from pipeline.sim.run import run_spec
 

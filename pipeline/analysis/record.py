@@ -1,0 +1,105 @@
+"""The analysis record on disk: ``<out>/<run>/analysis.json`` and ``directions.parquet``, a
+pair written as a set and read back only when whole (DESIGN §3, §6).
+
+``analysis.json`` carries a schema version (:data:`SCHEMA`); a reader refuses a version it
+does not know, a file that is not JSON, and a record missing a stage. It also carries the
+SHA-256 of the ``directions.parquet`` written with it: the table is written first and the
+record last, so a record whose table is missing or is another run's is caught on reading
+(a writer killed between the two, a disk that filled up).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.errors import LogError
+from pipeline.logs import atomic_write_bytes, atomic_write_text
+
+SCHEMA = "breve-analysis/1"
+RECORD_NAME = "analysis.json"
+TABLE_NAME = "directions.parquet"
+# The stages every record of a complete log holds, and those of a diverged log's record.
+STAGES = ("spec_name", "log", "spec_hash", "code_version", "integrator", "dt", "n_steps",
+          "window", "provenance", "directions", "dominant", "theory", "alignment",
+          "velocity_jump", "bus_rate", "metrics", "robot", "bus_mode", "mu_max_log")
+DIVERGED_STAGES = ("spec_name", "log", "spec_hash", "code_version", "integrator", "dt",
+                   "n_steps", "status", "diverged_step", "provenance", "divergence", "theory",
+                   "robot")
+
+
+def _table_bytes(record: dict) -> bytes:
+    rows = record["directions"]
+    table = pa.table({k: np.array([d[k] for d in rows]) for k in rows[0]})
+    table = table.replace_schema_metadata({b"pipeline.log": record["log"].encode()})
+    buf = io.BytesIO()
+    pq.write_table(table, buf, compression="zstd")
+    return buf.getvalue()
+
+
+def write_analysis(record: dict, out_dir: Path) -> Path:
+    """Write ``out_dir/<spec name>/analysis.json`` and its ``directions.parquet`` as a set:
+    the table first, then the record naming the table's hash (each atomically). If the
+    record cannot be written, the new table is removed, so no record points at it."""
+    folder = Path(out_dir) / record["spec_name"]
+    table_path, path = folder / TABLE_NAME, folder / RECORD_NAME
+    record = {"schema": SCHEMA, **{k: v for k, v in record.items() if k != "schema"}}
+    if record.get("directions"):
+        data = _table_bytes(record)
+        record["directions_sha256"] = hashlib.sha256(data).hexdigest()
+        atomic_write_bytes(table_path, data)
+    else:  # a diverged log has no per-direction stage: no stale table of an older run
+        record["directions_sha256"] = None
+        table_path.unlink(missing_ok=True)
+    try:
+        atomic_write_text(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
+    except BaseException:
+        table_path.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_analysis(path: Path | str) -> dict:
+    """A validated analysis record; LogError naming the file and the key otherwise."""
+    path = Path(path)
+    try:
+        record = json.loads(path.read_text())
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read the analysis record: {exc.strerror}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise LogError(f"{path}: not an analysis record (not JSON: {exc})") from None
+    if not isinstance(record, dict):
+        raise LogError(f"{path}: not an analysis record (not a JSON object)")
+    schema = record.get("schema")
+    if schema != SCHEMA:
+        raise LogError(f"{path}: key schema: {schema!r} is not a version this code reads "
+                       f"({SCHEMA})")
+    stages = DIVERGED_STAGES if record.get("status") == "diverged" else STAGES
+    for key in stages:
+        if key not in record:
+            raise LogError(f"{path}: key {key} missing (a stage of the analysis)")
+    digest = record.get("directions_sha256")
+    table = path.parent / TABLE_NAME
+    if digest is not None:
+        try:
+            have = hashlib.sha256(table.read_bytes()).hexdigest()
+        except OSError:
+            raise LogError(f"{path}: its {TABLE_NAME} is missing (written as a pair)") from None
+        if have != digest:
+            raise LogError(f"{path}: key directions_sha256: {TABLE_NAME} beside it is not the "
+                           f"one written with it")
+    return record
+
+
+def try_read_analysis(path: Path) -> dict | None:
+    """The record if it reads whole (:func:`read_analysis`), else None: for caches."""
+    try:
+        return read_analysis(path)
+    except LogError:
+        return None
