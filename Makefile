@@ -11,7 +11,7 @@ MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 SOURCES := $(shell find pipeline -name '*.py' -o -name '*.j2') $(wildcard specs/*.yaml) $(wildcard specs/robots/*)
 
-.PHONY: all setup runs analyses report claims claims-ci test lint sweep bench baselines repin clean
+.PHONY: all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
 
 # The claims first (they run what is missing, the sweeps included), then the reports, which
 # link the register; the reports are rendered even when a claim fails, and the recipe then
@@ -23,11 +23,21 @@ all: $(STAMP)
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,slurm]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,slurm]"
 	touch $@
+
+# Refresh the pinned versions: a throw-away venv, the ranges of pyproject.toml, pip freeze.
+# Deliberate: run `make baselines` after it, and re-pin only with a reason.
+lock:
+	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/python -m pip install --quiet --upgrade pip
+	.venv-lock/bin/python -m pip install --quiet -e ".[dev,slurm]"
+	{ sed -n '/^#/p' constraints.txt; .venv-lock/bin/python -m pip freeze --exclude-editable \
+		| grep -v '^-e'; } > constraints.txt.new && mv constraints.txt.new constraints.txt
+	rm -rf .venv-lock
 
 $(LOGS)/%/run.parquet: $(SOURCES) | $(STAMP)
 	$(PY) -m pipeline run $* --out $(LOGS)

@@ -15,6 +15,10 @@ class LogError(PipelineError):
     """A log is missing, unreadable, incomplete or lacks a column or metadata key (exit 2)."""
 
 
+class OutputError(PipelineError):
+    """An output cannot be written: its folder is a file, read-only or full (exit 2)."""
+
+
 class CheckFailed(PipelineError):
     """A provenance check or a claim does not hold (exit 1)."""
 

@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.errors import LogDamaged, LogError, SpecError
+from pipeline.errors import LogDamaged, LogError, OutputError, SpecError
 from pipeline.spec import Spec, build_spec, canonical_hash, file_hash
 
 VECTOR_COLUMNS = {
@@ -58,17 +58,26 @@ class LogMeta:
         return self.spec["name"]
 
 
+def _cannot_write(path: Path, exc: OSError) -> OutputError:
+    return OutputError(f"{path}: cannot write: {exc.strerror or exc} (nothing written there)")
+
+
 def _atomic_target(path: Path) -> Path:
-    """A fresh temporary file beside ``path``, readable as an ordinary file would be."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    """A fresh temporary file beside ``path``, readable as an ordinary file would be.
+    An output folder that is a file, read-only or full is an OutputError naming the path."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
     os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; the final file should not be
     os.close(fd)
     return Path(tmp)
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write bytes to ``path`` atomically (temporary file, fsync, rename)."""
+    """Write bytes to ``path`` atomically (temporary file, fsync, rename); on failure the
+    temporary file is removed and ``path`` is as it was."""
     path = Path(path)
     tmp = _atomic_target(path)
     try:
@@ -77,6 +86,8 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
     finally:
         tmp.unlink(missing_ok=True)
 
@@ -104,6 +115,8 @@ def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, 
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:  # pyarrow's IOError on a full disk is an OSError too
+        raise _cannot_write(path, exc) from None
     finally:
         tmp.unlink(missing_ok=True)
 

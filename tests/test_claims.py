@@ -117,7 +117,8 @@ def test_provenance_and_threshold_references(tmp_path):
     prov = json.loads((tmp_path / "out" / "claims.json").read_text())["claims"][0]["provenance"]
     assert prov == [{"code_version": prov[0]["code_version"], "log": str(
         b.logs / "t_nominal" / "run.parquet"), "source": "nominal", "spec": "t_nominal",
-        "spec_hash": prov[0]["spec_hash"]}]
+        "spec_hash": prov[0]["spec_hash"], "versions": prov[0]["versions"]}]
+    assert "numpy" in prov[0]["versions"] and "pinocchio" in prov[0]["versions"]
     assert len(prov[0]["spec_hash"]) == 64
 
 

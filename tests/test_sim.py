@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 from conftest import SEEDS, run_cli
 
-from pipeline.errors import LogError, RunFailed
+from pipeline.errors import LogError, OutputError, RunFailed
 from pipeline.logs import num_rows, read_columns, read_meta
 from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_guidance import BaseGuidance
@@ -496,7 +496,7 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
 
     monkeypatch.setattr(logs.pq, "write_table", boom)
     spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 0.3})
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="cannot write: disk full"):  # exit 2, one line
         run_spec(spec, tmp_path)
     assert [p for p in tmp_path.rglob("*") if p.is_file()] == []
 

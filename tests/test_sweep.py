@@ -417,3 +417,22 @@ def test_stability_bracket():
     assert b["measured"] == (0.01, 0.0225) and b["holds"] and b["n_complete"] == 4
     with pytest.raises(LogError, match=r"mission\.duration"):
         stability_bracket(_dt_table(dts, lags, [0.02] * 6), key="mission.duration")
+
+
+def test_the_bracket_judges_points_far_from_their_crossing_and_lists_the_near_ones():
+    """Issue 12: the prediction (period-2 above dt*) against the lag-1 sign, point by point,
+    more than 10 % from the crossing; nearer points are reported, not judged."""
+    dts = [0.005, 0.01, 0.015, 0.0175, 0.02, 0.03]
+    stars = [0.0156] * 6
+    lags = [0.99, 0.98, 0.97, -0.9, -0.95, -0.99]  # 0.015 (−3.8 %) and 0.0175 (+12 %)
+    b = stability_bracket(_dt_table(dts, lags, stars))
+    assert b["far_agree"] and b["n_far"] == 5 and [p["x"] for p in b["near"]] == [0.015]
+    # a far point measured smooth where period-2 is predicted: disagreement, named
+    b = stability_bracket(_dt_table(dts, [0.99, 0.98, 0.97, -0.9, -0.95, 0.5], stars))
+    assert not b["far_agree"] and b["far_disagree"] == [0.03]
+    # the other side: a bus inertia rings below its crossing
+    table = pd.DataFrame({"point": ["a", "b", "c"], "I_zz_bus": [0.0156, 0.0315, 1.0],
+                          "status": ["complete"] * 3, "bus_rate_lag1": [-0.99, 0.99, 0.99],
+                          "bus_critical_I_zz": [0.03] * 3})
+    b = stability_bracket(table, "I_zz_bus", "bus_rate_lag1", "bus_critical_I_zz", "below")
+    assert b["holds"] and b["far_agree"] and b["n_far"] == 2

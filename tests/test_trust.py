@@ -236,3 +236,139 @@ def test_analysis_files_are_a_pair(analysed):
 
     rec = read_analysis(analysed / "t3" / "analysis.json")
     assert rec["schema"] == SCHEMA and len(rec["directions_sha256"]) == 64
+
+
+# -- bounded resources, refused up front (issue 12, item 6) ------------------------------------
+
+@pytest.mark.parametrize("yaml_text,env,needle", [
+    ("extends: nominal\nmission: {duration: 1.0e9}\n", {},
+     "field mission.duration: the mission would need about"),
+    ("extends: nominal\ntarget: {n_points: 1000000000}\n", {},
+     "field target.n_points: the mission would need about"),
+    ("extends: nominal\nmission: {duration: 3600.0}\n", {"BREVE_TIME_BUDGET_H": "0.001"},
+     "field mission.duration: the mission would take about"),
+])
+def test_a_mission_over_budget_is_refused_before_any_work(tmp_path, monkeypatch, yaml_text,
+                                                          env, needle):
+    import time as _time
+
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    spec = tmp_path / "big.yaml"
+    spec.write_text(yaml_text)
+    t0 = _time.perf_counter()
+    r = run_cli("run", str(spec), "--out", str(tmp_path / "out"))
+    took = _time.perf_counter() - t0
+    assert r.returncode == 2, r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert needle in line and "budget" in line, line
+    assert not (tmp_path / "out").exists()
+    assert took < 30  # an interpreter start; the estimate itself allocates nothing
+
+
+def test_the_estimate_allocates_nothing_and_answers_fast():
+    import time as _time
+    import tracemalloc
+
+    from pipeline.budget import Budget, check_mission
+    from pipeline.errors import SpecError
+
+    spec = with_overrides(load_spec("nominal"), {"mission.duration": 1.0e9})
+    tracemalloc.start()
+    t0 = _time.perf_counter()
+    with pytest.raises(SpecError, match="memory budget"):
+        check_mission(spec, Budget(memory_bytes=8 * 2**30, seconds=3600.0))
+    took = _time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert took < 1.0 and peak < 10 * 2**20
+
+
+def test_a_sweep_of_a_million_points_is_refused_before_its_grid_is_built(tmp_path):
+    values = ",".join(f"{0.001 + 1e-6 * i:.6f}" for i in range(1000))
+    gains = ",".join(f"{1 + i}" for i in range(1000))
+    r = run_cli("sweep", "nominal", "--set", f"mission.dt={values}",
+                "--set", f"controller.gains.bus.D={gains}", "--logs", str(tmp_path / "l"),
+                "--out", str(tmp_path / "o"))
+    assert r.returncode == 2, r.stderr
+    assert "1,000,000 points, over the limit of 10,000" in r.stderr
+    assert not (tmp_path / "l").exists() and not (tmp_path / "o").exists()
+
+
+def test_the_budget_row_width_is_the_logs():
+    from pipeline.budget import ROW_FLOATS
+    from pipeline.sim.control_step import ROW_SIZE
+
+    assert ROW_FLOATS == ROW_SIZE
+
+
+def test_budget_overrides_are_validated(monkeypatch):
+    from pipeline.budget import Budget
+    from pipeline.errors import SpecError
+
+    monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", "0.5")
+    monkeypatch.setenv("BREVE_TIME_BUDGET_H", "2")
+    b = Budget.from_environment()
+    assert b.memory_bytes == 0.5 * 2**30 and b.seconds == 7200.0
+    monkeypatch.setenv("BREVE_TIME_BUDGET_H", "nan")
+    with pytest.raises(SpecError, match="BREVE_TIME_BUDGET_H"):
+        Budget.from_environment()
+
+
+# -- output folders that cannot be written (issue 12, item 8) ----------------------------------
+
+def test_an_output_folder_that_is_a_file_is_exit_2_naming_the_path(tmp_path):
+    blocker = tmp_path / "out"
+    blocker.write_text("a file where the log folder should be")
+    r = run_cli("run", "short_nominal", "--out", str(blocker))
+    assert r.returncode == 2, r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert str(blocker) in line and "cannot write" in line
+    assert blocker.read_text() == "a file where the log folder should be"
+
+
+def test_a_full_disk_leaves_nothing_partial(tmp_path, monkeypatch):
+    import errno
+    import os
+
+    import pipeline.logs as logs
+    from pipeline.errors import OutputError
+
+    target = tmp_path / "x.json"
+    target.write_text("old")
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(logs.os, "fsync", full)
+    with pytest.raises(OutputError, match="No space left on device"):
+        logs.atomic_write_text(target, "new")
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["x.json"]  # no temporary file left
+
+
+def test_an_analysis_pair_is_written_whole_or_not_at_all(log, tmp_path, monkeypatch):
+    """The record is the commit: if it cannot be written, the new table goes too."""
+    import pipeline.analysis.record as record
+    from pipeline.errors import OutputError
+
+    rec = analyze_log(log)
+
+    def full(path, text):
+        raise OutputError(f"{path}: cannot write: No space left on device")
+
+    monkeypatch.setattr(record, "atomic_write_text", full)
+    with pytest.raises(OutputError):
+        record.write_analysis(rec, tmp_path)
+    assert not (tmp_path / "t3" / "directions.parquet").exists()
+    assert not (tmp_path / "t3" / "analysis.json").exists()
+
+
+def test_a_sweep_whose_log_folder_is_a_file_is_exit_2_and_creates_nothing(tmp_path):
+    blocker = tmp_path / "logs"
+    blocker.write_text("a file")
+    r = run_cli("sweep", "short_nominal", "--set", "mission.dt=0.03", "--logs", str(blocker),
+                "--out", str(tmp_path / "o"))
+    assert r.returncode == 2, r.stderr
+    assert "is a file, not a folder" in r.stderr and str(blocker) in r.stderr
+    assert not (tmp_path / "o").exists()

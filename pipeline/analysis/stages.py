@@ -157,6 +157,8 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         "bus_rate": bus_rate_statistics(cols["v"][:, 3:6], dt,
                                         spec.controller.limits.omega_b_acc),
         "metrics": mission_metrics(cols),
+        "prediction": prediction(th["record"], directions[dom]["lag1"]),
+        "versions": meta.versions,
         "robot": asdict(card),
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
         "bus_mode": {"dt_mu_bus": dt * card.mu_bus, "critical_I_zz": dt * card.D_b / 2},
@@ -336,6 +338,19 @@ def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> dict:
             "step_rms": float(signals.step_rms(x)), "alternating_rms": float(signals.rms(alt)),
             "step_median": step, "step_bound": dt * acc_bound,
             "step_ratio": step / (dt * acc_bound)}
+
+
+def prediction(theory_record: dict, lag1: float) -> dict:
+    """Does the theory's prediction agree with the data (eqs. 22, 25)? Predicted period-2:
+    the map Φ of the run's integrator has a dominant eigenvalue that is real, negative and
+    outside the unit circle. Measured period-2: the dominant direction's lag-1 is negative.
+    NaN agrees with nothing."""
+    eig = theory_record["eig_dominant"]
+    predicted = bool(eig["real"] < 0 and abs(eig["imag"]) <= 1e-9 * abs(eig["real"])
+                     and theory_record["spectral_radius"] > 1)
+    measured = bool(lag1 < 0)
+    return {"period2_predicted": predicted, "period2_measured": measured,
+            "agrees": bool(np.isfinite(lag1) and predicted == measured)}
 
 
 def mu_max_along(path, dt: float, mu_bus: float, floor: float) -> dict:

@@ -164,7 +164,7 @@ class Context:
                 spec = str(self.here / spec)
             self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
                                                self.out / "sweeps", ref.workers, ref.key,
-                                               ref.lag, ref.predicted)
+                                               ref.lag, ref.predicted, ref.unstable)
         return self._sweeps[alias]
 
     def value(self, metric: str) -> tuple[Any, dict]:
@@ -191,7 +191,9 @@ class Context:
             return dig(b, path, "baselines.json"), prov
         run, record = self.runs[source], self.analyses[source]
         prov = {"source": source, "spec": run.spec.name, "spec_hash": run.meta.spec_hash,
-                "code_version": run.meta.code_version, "log": display_path(run.path)}
+                "code_version": run.meta.code_version, "log": display_path(run.path),
+                "versions": ", ".join(f"{k} {v}" for k, v in
+                                      sorted((run.meta.versions or {}).items()))}
         head, _, rest = path.partition(".")
         if head == "spec":
             return dig(run.spec.model_dump(mode="json"), rest, f"the spec of {source}"), prov

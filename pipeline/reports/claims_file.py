@@ -112,6 +112,7 @@ class SweepRef(_Strict):
     key: str = "mission.dt"
     lag: str = "dominant_lag1"
     predicted: str = "dt_star_damping"
+    unstable: Literal["above", "below"] = "above"
 
 
 class ClaimsFile(_Strict):

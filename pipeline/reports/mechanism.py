@@ -53,6 +53,12 @@ def verdict(run: dict, other: dict) -> Verdict:
     return Verdict("inconclusive", "The numbers do not match the period-2 mechanism.")
 
 
+def versions(rec: dict) -> str:
+    """The Python and numerical-library versions a record's log was made with, in one line."""
+    v = rec.get("versions") or {}
+    return ", ".join(f"{k} {v[k]}" for k in sorted(v)) or "not recorded"
+
+
 def robot_card(rec: dict) -> dict:
     """The record's robot card with the bus inertia's diagonal, as the templates show it."""
     card = dict(rec["robot"])
@@ -90,5 +96,5 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
         "fix_runs": fixes, "diag_D": np.diag(np.array(th["D_breve"])).tolist(),
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
-        "note_rows": note_rows(rec, other), "fmt": fmt,
+        "note_rows": note_rows(rec, other), "fmt": fmt, "versions": versions,
     }

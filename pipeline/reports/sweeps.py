@@ -39,7 +39,8 @@ def _fresh(table: Path, plan) -> bool:
 
 def ensure_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
                  workers: int = 2, key: str = "mission.dt", lag: str = "dominant_lag1",
-                 predicted: str = "dt_star_damping") -> tuple[dict, dict]:
+                 predicted: str = "dt_star_damping", unstable: str = "above"
+                 ) -> tuple[dict, dict]:
     """The stability bracket of the sweep and its provenance, running the sweep if needed."""
     plan = plan_sweep(spec, sets, name, logs, out)
     if not _fresh(plan.table_path, plan):
@@ -53,7 +54,7 @@ def ensure_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
         if r.returncode != 0:
             last = (r.stderr.strip().splitlines() or ["no message"])[-1]
             raise RunFailed(f"sweep {name} failed (exit {r.returncode}): {last}")
-    bracket = stability_bracket(plan.table_path, key, lag, predicted)
+    bracket = stability_bracket(plan.table_path, key, lag, predicted, unstable)
     prov = {"source": "sweep", "code_version": code_version(),
             "file": display_path(plan.table_path)}
     return bracket, prov

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from pipeline.budget import check_mission
 from pipeline.errors import RunFailed
 from pipeline.logs import LogMeta, library_versions, log_metadata, write_table
 from pipeline.sim.mission import Mission
@@ -32,6 +33,7 @@ def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
 
     Raises RunFailed (after writing the log) unless ``raise_on_failure`` is false.
     """
+    check_mission(spec)  # refused up front, before anything is allocated
     result = Mission(spec).run(progress=progress)
     meta = LogMeta(
         spec=spec.model_dump(mode="json"), spec_hash=spec.spec_hash,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
 import time
 import uuid
@@ -12,7 +14,8 @@ from typing import Any
 
 from tqdm import tqdm
 
-from pipeline.errors import RunFailed
+from pipeline.budget import Budget, check_mission, check_sweep_size, check_sweep_time
+from pipeline.errors import OutputError, RunFailed
 from pipeline.spec import Spec, load_spec
 from pipeline.sweep.cluster import open_client
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
@@ -44,12 +47,20 @@ class Sweep:
 
 def plan_sweep(spec: str | Path, sets: list[str], name: str | None = None,
                logs: Path | str = "logs/sweeps",
-               out: Path | str = "generated_reports/sweeps") -> Sweep:
-    """Parse and validate everything (SpecError on bad input); nothing runs, nothing is written."""
+               out: Path | str = "generated_reports/sweeps", workers: int = 1) -> Sweep:
+    """Parse and validate everything (SpecError on bad input); nothing runs, nothing is written.
+
+    The grid is counted before it is built and refused over ``MAX_SWEEP_POINTS``; each point
+    is a mission within the budget, and all of them on ``workers`` within the time budget."""
     base = load_spec(spec)
     axes = parse_sets(sets)
     sname = sweep_name(base.name, [k for k, _ in axes], name)
+    check_sweep_size(math.prod(len(vals) for _, vals in axes), f"sweep {sname}")
     points = build_grid(base, axes)
+    budget = Budget.from_environment()
+    per_point = max((check_mission(p.spec, budget, f"sweep {sname}: point {p.name}").seconds
+                     for p in points), default=0.0)
+    check_sweep_time(per_point, len(points), workers, f"sweep {sname}", budget)
     return Sweep(sname, base, axes, points, Path(logs).resolve() / sname,
                  Path(out).resolve() / sname)
 
@@ -115,8 +126,22 @@ def run_sweep(sweep: Sweep, client, progress: bool = False):
     return df, write_sweep_table(df, sweep.table_path, meta)
 
 
+def check_writable(folder: Path) -> None:
+    """OutputError (exit 2) if ``folder`` could not be created and written, found without
+    creating anything: its nearest existing ancestor must be a writable folder."""
+    p = folder
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    if not p.is_dir():
+        raise OutputError(f"{folder}: cannot write: {p} is a file, not a folder")
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise OutputError(f"{folder}: cannot write: {p} is not writable")
+
+
 def sweep_command(args: argparse.Namespace) -> int:
-    sweep = plan_sweep(args.spec, args.set, args.name, args.logs, args.out)
+    sweep = plan_sweep(args.spec, args.set, args.name, args.logs, args.out, args.workers)
+    for folder in (sweep.log_dir, sweep.out_dir):
+        check_writable(folder)
     progress = sys.stderr.isatty()
     t0 = time.perf_counter()
     with open_client(args.scheduler, args.workers, args.slurm,

@@ -85,8 +85,12 @@ def summary_text(df: pd.DataFrame, keys: list[str], path: Path) -> str:
     return "\n".join(lines)
 
 
+NEAR = 0.10  # points within 10 % of their predicted crossing are reported, not judged
+
+
 def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "mission.dt",
-                      lag: str = "dominant_lag1", predicted: str = "dt_star_damping") -> dict:
+                      lag: str = "dominant_lag1", predicted: str = "dt_star_damping",
+                      unstable: str = "above") -> dict:
     """Where the measured lag-1 (column ``lag``) changes sign along ``key``, against the
     predicted crossing (column ``predicted``, in ``key`` units): by default the dominant
     lag-1 along mission.dt against dt* = 2/μ_max.
@@ -97,6 +101,11 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
     (the median over the points; its spread is ``dt_star_range``). ``holds`` is true when
     the sign changes exactly once and every point's predicted crossing lies in the measured
     interval (``lo < crossing <= hi``). The keys say ``dt_star`` whatever the column.
+
+    Point by point: the prediction is period-2 on the ``unstable`` side of the point's
+    crossing (``above`` it for a time step, ``below`` it for a bus inertia), the measurement
+    a negative lag-1. ``far_agree`` is true when they agree at every point more than
+    ``NEAR`` (10 %) away from its crossing; the points nearer are listed in ``near``.
     """
     df = (sweep_table if isinstance(sweep_table, pd.DataFrame)
           else read_sweep_table(sweep_table))
@@ -117,10 +126,20 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
     measured = flips[0] if len(flips) == 1 else None
     holds = bool(measured is not None and stars.size
                  and all(measured[0] < s <= measured[1] for s in stars))
+    crossing = ok[predicted].to_numpy(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.abs(x / crossing - 1.0)
+    side = x > crossing if unstable == "above" else x < crossing
+    judged = rel > NEAR  # NaN (no crossing) is near: reported, not judged
+    agree = (lag_values < 0) == side
+    near = [{"x": float(x[i]), "lag1": float(lag_values[i]), "crossing": float(crossing[i])}
+            for i in np.flatnonzero(~judged)]
     return {
         "key": key, "lag": lag, "predicted_column": predicted, "n_points": len(df),
         "n_complete": len(ok), "grid": x.tolist(), "lag1": lag_values.tolist(),
         "flips": flips, "measured": measured, "dt_star": dt_star,
         "dt_star_range": (float(stars.min()), float(stars.max())) if stars.size else None,
         "predicted": predicted_bracket, "holds": holds,
+        "n_far": int(judged.sum()), "far_agree": bool(judged.any() and agree[judged].all()),
+        "far_disagree": [float(v) for v in x[judged & ~agree]], "near": near,
     }

@@ -1,0 +1,126 @@
+"""Budgets: work whose memory or time would exceed them is refused up front (exit 2).
+
+Estimated from the spec alone, before anything is allocated:
+
+- a mission holds its log in memory while it runs: steps × ``ROW_BYTES`` (the kernel's rows,
+  the columns handed to Arrow, and the Parquet encoder's buffers, 3 copies of a row of
+  ``ROW_SIZE`` floats), plus the target's points (7 numbers each);
+- its time is steps × (``STEP_SECONDS`` + points × ``POINT_SECONDS``), the simulator's cost
+  per step measured by ``make bench`` (about 90 µs, of which about 8 µs for 1,500 points),
+  rounded up;
+- a sweep is the product of its value lists (counted before any point is built), at most
+  ``MAX_SWEEP_POINTS``, each point a mission within the budget, the time divided among the
+  workers.
+
+Defaults: memory half of this machine's, time 24 hours. ``BREVE_MEMORY_BUDGET_GB`` and
+``BREVE_TIME_BUDGET_H`` override them (documented in the README).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+from pipeline.errors import SpecError
+
+STEP_SECONDS = 1.5e-4  # s per step without the target (bench: ~8e-5), with margin
+POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
+ROW_FLOATS = 75  # the log row's width (control_step.ROW_SIZE; a test keeps them equal)
+ROW_BYTES = 3 * 8 * ROW_FLOATS
+POINT_BYTES = 7 * 8
+MAX_SWEEP_POINTS = 10_000
+DEFAULT_TIME_H = 24.0
+
+
+@dataclass(frozen=True)
+class Budget:
+    memory_bytes: float
+    seconds: float
+
+    @classmethod
+    def from_environment(cls) -> Budget:
+        """The budget in force: the defaults, or the environment's overrides."""
+        import psutil
+
+        mem = _env_float("BREVE_MEMORY_BUDGET_GB")
+        hours = _env_float("BREVE_TIME_BUDGET_H")
+        return cls(memory_bytes=(mem * 2**30 if mem is not None
+                                 else 0.5 * psutil.virtual_memory().total),
+                   seconds=3600.0 * (hours if hours is not None else DEFAULT_TIME_H))
+
+
+def _env_float(name: str) -> float | None:
+    text = os.environ.get(name)
+    if text is None or text == "":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise SpecError(f"environment {name}={text!r}: not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise SpecError(f"environment {name}={text!r}: must be a positive number")
+    return value
+
+
+@dataclass(frozen=True)
+class Estimate:
+    steps: int
+    memory_bytes: float
+    seconds: float
+
+
+def mission_estimate(duration: float, dt: float, n_points: int) -> Estimate:
+    """Memory and time of one mission, from its duration, step and target size."""
+    steps = round(duration / dt)
+    return Estimate(steps, steps * ROW_BYTES + n_points * POINT_BYTES,
+                    steps * (STEP_SECONDS + n_points * POINT_SECONDS))
+
+
+def _gb(x: float) -> str:
+    return f"{x / 2**30:.3g} GiB"
+
+
+def _h(x: float) -> str:
+    return f"{x / 3600:.3g} h"
+
+
+def check_mission(spec, budget: Budget | None = None, where: str = "") -> Estimate:
+    """SpecError naming the field when one mission of ``spec`` exceeds the budget."""
+    budget = budget or Budget.from_environment()
+    m, t = spec.mission, spec.target
+    est = mission_estimate(m.duration, m.dt, t.n_points)
+    src = where or spec.name
+    if est.memory_bytes > budget.memory_bytes:
+        field = ("target.n_points" if t.n_points * POINT_BYTES > est.steps * ROW_BYTES
+                 else "mission.duration")
+        raise SpecError(f"{src}: field {field}: the mission would need about "
+                        f"{_gb(est.memory_bytes)} ({est.steps:,} steps, {t.n_points:,} target "
+                        f"points), over the memory budget of {_gb(budget.memory_bytes)} "
+                        f"(BREVE_MEMORY_BUDGET_GB)")
+    if est.seconds > budget.seconds:
+        field = ("target.n_points" if t.n_points * POINT_SECONDS > STEP_SECONDS
+                 else "mission.duration")
+        raise SpecError(f"{src}: field {field}: the mission would take about "
+                        f"{_h(est.seconds)} ({est.steps:,} steps, {t.n_points:,} target "
+                        f"points), over the time budget of {_h(budget.seconds)} "
+                        f"(BREVE_TIME_BUDGET_H)")
+    return est
+
+
+def check_sweep_size(n_points: int, what: str) -> None:
+    """SpecError when a sweep's grid has more points than ``MAX_SWEEP_POINTS``."""
+    if n_points > MAX_SWEEP_POINTS:
+        raise SpecError(f"{what}: the grid has {n_points:,} points, over the limit of "
+                        f"{MAX_SWEEP_POINTS:,} a sweep may have")
+
+
+def check_sweep_time(per_point_seconds: float, n_points: int, workers: int, what: str,
+                     budget: Budget | None = None) -> None:
+    """SpecError when the sweep's points, shared among ``workers``, exceed the time budget."""
+    budget = budget or Budget.from_environment()
+    total = per_point_seconds * n_points / max(workers, 1)
+    if total > budget.seconds:
+        raise SpecError(f"{what}: {n_points:,} points on {workers} workers would take about "
+                        f"{_h(total)}, over the time budget of {_h(budget.seconds)} "
+                        f"(BREVE_TIME_BUDGET_H)")
