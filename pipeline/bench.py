@@ -36,7 +36,7 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis import signals
 from pipeline.analysis.stages import Window, rebuild_and_project
-from pipeline.logs import atomic_write_text
+from pipeline.logs import atomic_write_text, file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
@@ -132,7 +132,7 @@ def tiled_log(src: Path, dst: Path, factor: int) -> Path:
     """
     pf = pq.ParquetFile(src)
     n = pf.metadata.num_rows
-    md = dict(pf.schema_arrow.metadata)
+    md = {k.encode(): v.encode() for k, v in file_metadata(src).items()}
     spec = json.loads(md[b"pipeline.spec"])
     dt = spec["mission"]["dt"]
     # The metadata says what the file is, so the log passes verify_log: a mission `factor`

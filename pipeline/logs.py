@@ -7,6 +7,7 @@ same folder, fsynced, then renamed over the target.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -121,6 +122,67 @@ def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, 
         tmp.unlink(missing_ok=True)
 
 
+class LogWriter:
+    """A log written row group by row group into a temporary file beside ``path``, so a long
+    run's memory stays at one row group; :meth:`close` puts the keys known only at the end
+    (status, failed step, error, row count) into the Parquet footer, then fsyncs and renames:
+    a run killed before that leaves no file that looks complete (DESIGN §6).
+
+    Use as a context manager: leaving it without :meth:`close` removes the temporary file.
+    """
+
+    def __init__(self, path: Path, metadata: dict[str, str]):
+        self.path = Path(path)
+        self.metadata = metadata
+        self.rows = 0
+        self._tmp = _atomic_target(self.path)
+        self._writer: pq.ParquetWriter | None = None
+
+    def write(self, columns: dict[str, np.ndarray]) -> None:
+        """Append one row group (every column, same length)."""
+        table = pa.table({k: _arrow_column(v) for k, v in columns.items()})
+        try:
+            if self._writer is None:
+                schema = table.schema.with_metadata(
+                    {k.encode(): v.encode() for k, v in self.metadata.items()})
+                self._writer = pq.ParquetWriter(self._tmp, schema, compression="zstd")
+            self._writer.write_table(table, row_group_size=ROW_GROUP)
+        except OSError as exc:
+            raise _cannot_write(self.path, exc) from None
+        self.rows += table.num_rows
+
+    def close(self, final: dict[str, str]) -> Path:
+        """Write the footer with ``final`` keys and move the file into place."""
+        if self._writer is None:
+            raise ValueError("a log needs at least one write, even of zero rows")
+        try:
+            self._writer.add_key_value_metadata({**self.metadata, **final})
+            self._writer.close()
+            with open(self._tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(self._tmp, self.path)
+        except OSError as exc:
+            raise _cannot_write(self.path, exc) from None
+        return self.path
+
+    def __enter__(self) -> LogWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._writer is not None and exc[0] is not None:
+            with contextlib.suppress(Exception):
+                self._writer.close()
+        self._tmp.unlink(missing_ok=True)
+
+
+def static_metadata(meta: LogMeta) -> dict[str, str]:
+    """The keys of a log known before it runs (the spec, the code, the robot, the versions)."""
+    return {k: v for k, v in log_metadata(meta).items() if k not in FINAL_KEYS}
+
+
+FINAL_KEYS = ("pipeline.status", "pipeline.failed_step", "pipeline.error", "pipeline.rows")
+
+
 def log_metadata(meta: LogMeta) -> dict[str, str]:
     return {
         "pipeline.spec": json.dumps(meta.spec, sort_keys=True),
@@ -161,10 +223,16 @@ def _open(path: Path) -> pq.ParquetFile:
         raise LogError(f"{path}: not a readable Parquet log ({str(exc).splitlines()[0]})") from None
 
 
+def file_metadata(path: Path) -> dict[str, str]:
+    """The key-value metadata of a Parquet file's footer (where :class:`LogWriter` puts the
+    keys it learns at the end of a run), without Arrow's own schema key."""
+    md = _open(path).metadata.metadata or {}
+    return {k.decode(): v.decode() for k, v in md.items() if k != b"ARROW:schema"}
+
+
 def read_meta(path: Path) -> LogMeta:
     """The log's metadata; a missing key is a LogError naming it."""
-    md = _open(path).schema_arrow.metadata or {}
-    md = {k.decode(): v.decode() for k, v in md.items()}
+    md = file_metadata(path)
     for key in META_KEYS:
         if f"pipeline.{key}" not in md:
             raise LogError(f"{path}: metadata key pipeline.{key} missing")

@@ -67,3 +67,11 @@ def run_cli(*args: str, cwd: Path | None = None, timeout: float = 120
     env = dict(os.environ, PYTHONWARNINGS="error")
     return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd or PROJECT_ROOT,
                           capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def footer_metadata(path: Path) -> dict[bytes, bytes]:
+    """A log's metadata as its writer left it (the Parquet footer: the keys known at the start
+    and those written at the end), to carry over when a test rewrites the log."""
+    from pipeline.logs import file_metadata
+
+    return {k.encode(): v.encode() for k, v in file_metadata(path).items()}

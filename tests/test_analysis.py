@@ -10,6 +10,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from conftest import footer_metadata
 
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, sign_continuous
@@ -169,7 +170,7 @@ def test_tampered_log_fails_provenance(short_logs, tmp_path):
     bad = tmp_path / "tampered" / "run.parquet"
     bad.parent.mkdir()
     pq.write_table(t.set_column(t.schema.get_field_index("s_min_G"), "s_min_G",
-                                pa.array(s)).replace_schema_metadata(t.schema.metadata), bad)
+                                pa.array(s)).replace_schema_metadata(footer_metadata(src)), bad)
     r = _analyze(bad, "--out", tmp_path / "out")
     assert r.returncode == 1
     assert "step 57" in r.stderr
@@ -180,7 +181,7 @@ def _write_variant(src, dst, drop=None, meta=None, rows=None):
     t = pq.read_table(src)
     if rows is not None:
         t = t.slice(0, rows)
-    md = dict(t.schema.metadata)
+    md = footer_metadata(src)
     if drop in t.column_names:
         t = t.drop_columns([drop])
     elif drop is not None:

@@ -13,6 +13,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from conftest import footer_metadata
 from report_fixtures import analyse_pair, built, write_spec
 
 from pipeline.reports import baselines, sources
@@ -216,10 +217,11 @@ def test_html_escapes_spec_names_and_descriptions(tmp_path):
 
 def _perturb(path: Path, column: str, row: int, delta: float) -> None:
     t = pq.read_table(path)
+    md = footer_metadata(path)
     x = t.column(column).to_numpy().copy()
     x[row] += delta
     t = t.set_column(t.schema.get_field_index(column), column, pa.array(x))
-    pq.write_table(t.replace_schema_metadata(t.schema.metadata), path)
+    pq.write_table(t.replace_schema_metadata(md), path)
 
 
 def test_baseline_check_is_zero_on_a_rerun_and_names_a_changed_column(tmp_path, monkeypatch):

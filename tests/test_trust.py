@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import run_cli
+from conftest import footer_metadata, run_cli
 
 from pipeline.analysis.stages import analyze_log
 from pipeline.errors import LogDamaged
@@ -36,7 +36,7 @@ def log(tmp_path_factory) -> Path:
 def _rewrite(src: Path, dst: Path, table: pa.Table | None = None,
              meta: dict[str, str] | None = None) -> Path:
     t = pq.read_table(src) if table is None else table
-    md = dict(pq.read_schema(src).metadata)
+    md = footer_metadata(src)
     md.update({k.encode(): v.encode() for k, v in (meta or {}).items()})
     dst.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(t.replace_schema_metadata(md), dst)
@@ -371,4 +371,12 @@ def test_a_sweep_whose_log_folder_is_a_file_is_exit_2_and_creates_nothing(tmp_pa
                 "--out", str(tmp_path / "o"))
     assert r.returncode == 2, r.stderr
     assert "is a file, not a folder" in r.stderr and str(blocker) in r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-1"])
+def test_a_window_start_that_is_not_a_time_is_exit_2(log, tmp_path, value):
+    r = run_cli("analyze", str(log), "--window-start", value, "--out", str(tmp_path / "o"))
+    assert r.returncode == 2, r.stderr
+    assert "window" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()

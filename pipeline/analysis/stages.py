@@ -16,7 +16,7 @@ import numpy as np
 
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
-from pipeline.errors import CheckFailed, LogError
+from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.logs import (
     LogMeta,
     iter_columns,
@@ -46,6 +46,8 @@ class Window:
 def choose_window(n: int, dt: float, window_start: float | None) -> Window:
     if window_start is None:
         return Window(n // 2, n, "second half of the mission (after start-up transients)")
+    if not np.isfinite(window_start):
+        raise SpecError(f"--window-start {window_start}: not a finite number of seconds")
     start = round(window_start / dt)
     if window_start < 0 or n - start < 3:
         raise LogError(f"window start {window_start} s leaves fewer than 3 steps of a "

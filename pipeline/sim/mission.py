@@ -16,13 +16,14 @@ and Pinocchio's integrate closes it. :meth:`Mission.step` runs that same code on
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
+from pipeline.logs import ROW_GROUP, SCALAR_COLUMNS, VECTOR_COLUMNS
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
 from pipeline.sim.breve_controller import damping_rates
@@ -81,11 +82,12 @@ class TaskErrors:
 
 @dataclass
 class MissionResult:
-    columns: dict[str, np.ndarray]
+    columns: dict[str, np.ndarray] | None  # None when the run wrote them to a sink
     status: str
     failed_step: int | None = None
     error: str = ""
     warnings: list[str] = field(default_factory=list)
+    rows: int = 0  # the rows of the log
 
 
 def task_errors(T: Terms, ref: Reference, gamma: float, v_c: np.ndarray) -> TaskErrors:
@@ -193,12 +195,32 @@ class Mission:
         cols = log_columns(rows)
         return nxt, {name: cols[name][0] for name in ROW}
 
-    def run(self, progress: bool = False) -> MissionResult:
+    def run(self, progress: bool = False,
+            sink: Callable[[dict[str, np.ndarray]], None] | None = None,
+            chunk: int = ROW_GROUP) -> MissionResult:
         """Run every step. A non-finite state ends the run with status ``failed`` (its log
         holds the steps before it); the v_max clip binding on ``DIVERGENCE_STEPS`` consecutive
-        steps ends it with status ``diverged`` (its log holds the steps up to that one)."""
+        steps ends it with status ``diverged`` (its log holds the steps up to that one).
+
+        With a ``sink`` the log's columns are handed to it ``chunk`` steps at a time (the last
+        chunk possibly shorter or empty) and memory stays at one chunk; the result then holds
+        no columns. Without one they are returned whole.
+        """
         n = self.spec.n_steps
-        rows = np.zeros((n, ROW_SIZE))
+        size = max(1, min(n, chunk)) if sink is not None else max(n, 1)
+        rows = np.zeros((size, ROW_SIZE))
+        parts: list[dict[str, np.ndarray]] = []
+        out = sink if sink is not None else parts.append
+        first = 0  # the step of rows[0]
+
+        def flush(count: int) -> None:
+            # Copies: the buffer is reused for the next chunk.
+            out({k: np.array(v) for k, v in log_columns(rows[:count], self.dt, first).items()})
+
+        def result(status: str, step: int | None = None, error: str = "") -> MissionResult:
+            cols = None if sink is not None else _concat_columns(parts)
+            return MissionResult(cols, status, step, error, warned, rows=n_rows)
+
         s0 = self.initial_state()
         state = pack(STATE_FIELDS, {"q": s0.q, "v": s0.v, "v_c": s0.v_c,
                                     "v_breve": s0.v_breve, "integral": s0.integral})
@@ -217,37 +239,50 @@ class Mission:
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
                                              mininterval=0.5, desc=self.spec.name) as bar:
             for k in range(n):
+                i = k - first
                 try:
-                    finite = self._advance(k, state, rows, ctrl, coverage)
+                    finite = self._advance(i, state, rows, ctrl, coverage)
                 except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
                     finite, why = False, f"{type(exc).__name__}: {exc}"
                 else:
                     why = "non-finite state"
                 if not finite:
-                    cols = log_columns(rows[:k], self.dt)
-                    return MissionResult(cols, "failed", k, f"step {k}: {why}", warned)
-                if explicit and not warned and rows[k, _DT_MU] > 2:
-                    warned.append(stability_warning(k, float(rows[k, _DT_MU]), self.dt))
-                clipped = clipped + 1 if rows[k, _SAT_V_MAX] > 0.5 else 0
+                    flush(i)
+                    n_rows = k
+                    return result("failed", k, f"step {k}: {why}")
+                if explicit and not warned and rows[i, _DT_MU] > 2:
+                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), self.dt))
+                clipped = clipped + 1 if rows[i, _SAT_V_MAX] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
-                    cols = log_columns(rows[:k + 1], self.dt)
-                    why = divergence_message(k, float(rows[k, _DT_MU]), self.dt,
-                                             self.spec.controller.integrator)
-                    return MissionResult(cols, "diverged", k, why, warned)
+                    flush(i + 1)
+                    n_rows = k + 1
+                    return result("diverged", k, divergence_message(
+                        k, float(rows[i, _DT_MU]), self.dt, self.spec.controller.integrator))
+                if i + 1 == size and k + 1 < n:
+                    flush(size)
+                    first = k + 1
                 if progress and (k + 1) % 100 == 0:
                     bar.update(100)
             bar.update(n - bar.n)
-        return MissionResult(log_columns(rows, self.dt), "complete", warnings=warned)
+        flush(n - first)
+        n_rows = n
+        return result("complete")
 
 
-def log_columns(rows: np.ndarray, dt: float = 0.0) -> dict[str, np.ndarray]:
-    """The log's columns (DESIGN §6, in the log's order) from the kernel's rows (``ROW_FIELDS``)."""
-    n = len(rows)
+def _concat_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    if len(parts) == 1:
+        return parts[0]
+    return {c: np.concatenate([p[c] for p in parts]) for c in parts[0]}
+
+
+def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, np.ndarray]:
+    """The log's columns (DESIGN §6, in the log's order) from the kernel's rows (``ROW_FIELDS``)
+    of steps ``first``, ``first`` + 1, …; t = step·dt."""
+    step = np.arange(first, first + len(rows), dtype=np.int64)
     cols = {c: rows[:, ROW[c]] for c in VECTOR_COLUMNS}
-    cols |= {c: (np.arange(n) * dt if c == "t" else rows[:, ROW[c].start])
-             for c in SCALAR_COLUMNS}
+    cols |= {c: (step * dt if c == "t" else rows[:, ROW[c].start]) for c in SCALAR_COLUMNS}
     cols |= {c: rows[:, ROW[c].start] > 0.5 for c in LIMIT_FLAGS}
-    cols["step"] = np.arange(n, dtype=np.int64)
+    cols["step"] = step
     return cols
 
 

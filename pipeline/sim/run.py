@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from pipeline.budget import check_mission
 from pipeline.errors import RunFailed
-from pipeline.logs import LogMeta, library_versions, log_metadata, write_table
+from pipeline.logs import (
+    FINAL_KEYS,
+    LogMeta,
+    LogWriter,
+    library_versions,
+    log_metadata,
+    static_metadata,
+)
 from pipeline.sim.mission import Mission
 from pipeline.spec import SPECS_DIR, Spec, file_hash
 from pipeline.version import code_version
@@ -34,19 +41,23 @@ def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
     Raises RunFailed (after writing the log) unless ``raise_on_failure`` is false.
     """
     check_mission(spec)  # refused up front, before anything is allocated
-    result = Mission(spec).run(progress=progress)
+    mission = Mission(spec)
     meta = LogMeta(
         spec=spec.model_dump(mode="json"), spec_hash=spec.spec_hash,
         code_version=code_version(),
         robot_file=str(spec.robot_path.relative_to(SPECS_DIR.parent)),
-        robot_hash=file_hash(spec.robot_path), status=result.status,
-        failed_step=result.failed_step, error=result.error,
-        rows=len(result.columns["step"]), versions=library_versions(),
+        robot_hash=file_hash(spec.robot_path), status="", failed_step=None, error="",
+        versions=library_versions(),
     )
     path = log_path(spec, Path(out_dir))
-    write_table(path, result.columns, log_metadata(meta))
-    outcome = RunOutcome(path, result.status, len(result.columns["step"]), result.warnings,
-                         result.error)
+    # Row group by row group: a long run's memory stays at one group; the status and the
+    # row count go into the footer when the file is closed and renamed into place.
+    with LogWriter(path, static_metadata(meta)) as writer:
+        result = mission.run(progress=progress, sink=writer.write)
+        final = replace(meta, status=result.status, failed_step=result.failed_step,
+                        error=result.error, rows=writer.rows)
+        writer.close({k: v for k, v in log_metadata(final).items() if k in FINAL_KEYS})
+    outcome = RunOutcome(path, result.status, writer.rows, result.warnings, result.error)
     if result.status != "complete" and raise_on_failure:
         raise RunFailed(f"{spec.name}: run {result.status} at {result.error}; log marked "
                         f"{result.status}: {path}")
