@@ -11,7 +11,7 @@ import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -283,7 +283,7 @@ def _check_columns(path: Path, pf: pq.ParquetFile, columns: list[str]) -> None:
 def read_columns(path: Path, columns: list[str], start: int = 0,
                  stop: int | None = None) -> dict[str, np.ndarray]:
     """Columns for rows [start, stop) as arrays (vectors as N×k), read by row group."""
-    return _concat(iter_columns(path, columns, start, stop), columns)
+    return concat_columns(iter_columns(path, columns, start, stop), columns)
 
 
 def iter_columns(path: Path, columns: list[str], start: int = 0,
@@ -304,7 +304,9 @@ def iter_columns(path: Path, columns: list[str], start: int = 0,
             break
 
 
-def _concat(chunks: Iterator[dict[str, np.ndarray]], columns: list[str]) -> dict[str, np.ndarray]:
+def concat_columns(chunks: Iterable[dict[str, np.ndarray]], columns: list[str]
+                   ) -> dict[str, np.ndarray]:
+    """Chunks of the same columns joined along time (empty arrays for no chunk)."""
     parts = list(chunks)
     if not parts:
         return {c: np.empty((0, VECTOR_COLUMNS[c]) if c in VECTOR_COLUMNS else 0) for c in columns}

@@ -23,7 +23,7 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from pipeline.logs import ROW_GROUP, SCALAR_COLUMNS, VECTOR_COLUMNS
+from pipeline.logs import ROW_GROUP, SCALAR_COLUMNS, VECTOR_COLUMNS, concat_columns
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
 from pipeline.sim.breve_controller import damping_rates
@@ -218,7 +218,7 @@ class Mission:
             out({k: np.array(v) for k, v in log_columns(rows[:count], self.dt, first).items()})
 
         def result(status: str, step: int | None = None, error: str = "") -> MissionResult:
-            cols = None if sink is not None else _concat_columns(parts)
+            cols = None if sink is not None else concat_columns(parts, list(parts[0]))
             return MissionResult(cols, status, step, error, warned, rows=n_rows)
 
         s0 = self.initial_state()
@@ -267,12 +267,6 @@ class Mission:
         flush(n - first)
         n_rows = n
         return result("complete")
-
-
-def _concat_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    if len(parts) == 1:
-        return parts[0]
-    return {c: np.concatenate([p[c] for p in parts]) for c in parts[0]}
 
 
 def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, np.ndarray]:
