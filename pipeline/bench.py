@@ -1,6 +1,6 @@
 """``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor.
 
-See DESIGN §7.
+See docs/architecture.md §7.
 
 Every figure is measured in this process on the same configurations (those of a nominal run),
 repeated, and reported as median with min and max. Each repeat times the floor, the simulator

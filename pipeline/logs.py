@@ -1,6 +1,6 @@
 """The run log: one Parquet file per run, the contract between ``sim`` and ``analysis``.
 
-Per-step columns (DESIGN §6), vector columns as fixed-size lists of float64, and schema
+Per-step columns (architecture §6), vector columns as fixed-size lists of float64, and schema
 metadata under ``pipeline.*`` keys. Files are written atomically: a temporary file in the
 same folder, fsynced, then renamed over the target.
 """
@@ -126,7 +126,7 @@ class LogWriter:
     """A log written row group by row group into a temporary file beside ``path``, so a long
     run's memory stays at one row group; :meth:`close` puts the keys known only at the end
     (status, failed step, error, row count) into the Parquet footer, then fsyncs and renames:
-    a run killed before that leaves no file that looks complete (DESIGN §6).
+    a run killed before that leaves no file that looks complete (architecture §6).
 
     Use as a context manager: leaving it without :meth:`close` removes the temporary file.
     """
@@ -327,7 +327,7 @@ def _damaged(path: Path, check: str, detail: str) -> LogDamaged:
 
 
 def verify_log(path: Path | str) -> VerifiedLog:
-    """Check a log against its own metadata before anything believes it (DESIGN §6).
+    """Check a log against its own metadata before anything believes it (architecture §6).
 
     - the metadata spec hashes, canonically, to ``pipeline.spec_hash`` and is a valid spec;
     - the row count is the recorded one, and fits the status: every step of a ``complete``

@@ -1,6 +1,6 @@
 """Rebuild Γ from the logged q and project the logged velocity on its singular directions.
 
-Stage 1 (provenance) and stage 2 (per-direction SVD, eq. 26) of DESIGN §3. Γ is rebuilt at
+Stage 1 (provenance) and stage 2 (per-direction SVD, eq. 26) of architecture §3. Γ is rebuilt at
 every step by the simulator's own kernels (``GiordanoRobot.gamma_matrices``) from q alone;
 nothing logged but q and v is trusted. The SVDs run batched, compiled, over slices of the log:
 singular values alone where only the provenance needs them, with the right-singular vectors

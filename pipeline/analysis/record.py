@@ -1,5 +1,5 @@
 """The analysis record on disk: ``<out>/<run>/analysis.json`` and ``directions.parquet``, a
-pair written as a set and read back only when whole (DESIGN §3, §6).
+pair written as a set and read back only when whole (architecture §3, §6).
 
 ``analysis.json`` carries a schema version (:data:`SCHEMA`); a reader refuses a version it
 does not know, a file that is not JSON, and a record missing a stage. It also carries the

@@ -1,4 +1,4 @@
-"""The analysis of one log (DESIGN §3): stages 1–6, and stage 7 for a pair of logs.
+"""The analysis of one log (architecture §3): stages 1–6, and stage 7 for a pair of logs.
 
 Window rule: the analysis window is [window_start, end) with window_start = half the mission
 by default, so start-up transients are excluded. Theory is evaluated at the representative

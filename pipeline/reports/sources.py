@@ -242,10 +242,3 @@ def scan_package(root: Path = PACKAGE) -> CodeIndex:
             continue
         index.sites.extend(scan_file(path))
     return index
-
-
-def qualname_of(obj) -> str:
-    """The index's qualified name of a function, method, property or class."""
-    if isinstance(obj, property):
-        obj = obj.fget
-    return f"{obj.__module__}.{obj.__qualname__}"

@@ -4,7 +4,7 @@ reads and writes.
 The mission calls Pinocchio, then :func:`controller_step` with Pinocchio's outputs, the
 references, the controller's parameters, the carried state and the log. A step computes some
 forty small arrays; handed between Python and compiled code one by one, their boxing would
-cost several times the Pinocchio calls themselves (DESIGN §7). So the state, the parameters
+cost several times the Pinocchio calls themselves (architecture §7). So the state, the parameters
 and the log row are flat float vectors whose layouts are named here, next to the code that
 reads them.
 """
@@ -55,7 +55,7 @@ STATE_FIELDS = (("q", 13), ("v", 12), ("v_c", 3), ("v_breve", 9), ("tau", 1), ("
 STATE = _offsets(STATE_FIELDS)
 STATE_SIZE = sum(n for _, n in STATE_FIELDS)
 
-# One log row (DESIGN §6), written by the kernel; ``t`` and ``step`` are filled by the mission.
+# One log row (architecture §6), written by the kernel; the mission fills ``t`` and ``step``.
 ROW_FIELDS = (("tau", 1), ("q", 13), ("v", 12), ("v_c", 3), ("v_breve", 9), ("v_breve_des", 9),
               ("x_tilde", 9), ("s_min_G", 1), ("kappa_G", 1), ("s_min_J", 1), ("kappa_J", 1),
               ("gamma", 1), ("dt_mu_max", 1), ("pointing_err_deg", 1), ("boresight_err_deg", 1),

@@ -1,4 +1,5 @@
-"""The inspection mission: one controller step after another, logged per step (DESIGN §2).
+"""The inspection mission: one controller step after another, logged per step (architecture
+§2).
 
 Order of one step k (the discrete map of eq. 22 follows exactly this order):
 1. terms of (q_k, v_k); γ_k from s_min_G; references at guidance time τ_k;
@@ -270,8 +271,8 @@ class Mission:
 
 
 def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, np.ndarray]:
-    """The log's columns (DESIGN §6, in the log's order) from the kernel's rows (``ROW_FIELDS``)
-    of steps ``first``, ``first`` + 1, …; t = step·dt."""
+    """The log's columns (architecture §6, in the log's order) from the kernel's rows
+    (``ROW_FIELDS``) of steps ``first``, ``first`` + 1, …; t = step·dt."""
     step = np.arange(first, first + len(rows), dtype=np.int64)
     cols = {c: rows[:, ROW[c]] for c in VECTOR_COLUMNS}
     cols |= {c: (step * dt if c == "t" else rows[:, ROW[c].start]) for c in SCALAR_COLUMNS}

@@ -1,4 +1,4 @@
-"""Run one spec into its Parquet log: ``DIR/<spec name>/run.parquet`` (DESIGN §6)."""
+"""Run one spec into its Parquet log: ``DIR/<spec name>/run.parquet`` (architecture §6)."""
 
 from __future__ import annotations
 

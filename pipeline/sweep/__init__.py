@@ -1,4 +1,4 @@
-"""Sweeps on Dask (DESIGN §5): one spec over a grid of overrides, one task per point.
+"""Sweeps on Dask (architecture §5): one spec over a grid of overrides, one task per point.
 
 ``python -m pipeline sweep SPEC --set KEY=V1,V2,… [--set …]`` runs every point of the product
 of the ``--set`` lists as a Dask task that simulates (unless cached), analyses, and writes
