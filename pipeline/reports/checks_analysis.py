@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
-from pipeline.reports.checks_base import Outcome, check, rng
+from pipeline.reports.checks_base import Check, Outcome, check, rng
 
 
 @check("25", "lag-1 autocorrelation vs an explicit loop over the definition; −1 for an "
@@ -65,3 +66,18 @@ def _velocity_jumps() -> Outcome:
     ref = [math.hypot(*(v[k + 1] - v[k])) for k in range(len(v) - 1)]
     return Outcome("200 random 12-vectors", float(np.max(np.abs(velocity_jumps(v) - ref))),
                    1e-13)
+
+
+# This module's checks, in the order the cross-check shows them: an explicit list, read by
+# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+CHECKS = (
+    _lag1,
+    _projection,
+    _abs_cos,
+    _velocity_jumps,
+)
+
+
+def checks() -> Iterator[Check]:
+    """This module's checks (``CHECKS``)."""
+    return (fn.check for fn in CHECKS)

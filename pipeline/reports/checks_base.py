@@ -2,8 +2,9 @@
 
 A check names the equation it tests and the code it tests (a qualified name, looked up in the
 code index so its file:line is found by inspection), and returns the inputs it used, the
-largest absolute difference and the tolerance. Checks are registered by decorator in the
-``checks_*`` modules; :func:`run_checks` runs all of them, turning an exception into a FAIL.
+largest absolute difference and the tolerance. The ``checks_*`` modules mark their checks with
+:func:`check` and list them in ``CHECKS``; :mod:`pipeline.reports.equation_checks` collects them
+explicitly, and :func:`run_check` runs one, turning an exception into a FAIL.
 """
 
 from __future__ import annotations
@@ -57,15 +58,13 @@ class CheckResult:
         return self.status == "PASS"
 
 
-REGISTRY: list[Check] = []
-
-
 def check(eq: str, title: str, *targets: str) -> Callable:
-    """Register a check of equation ``eq`` against the code at ``targets`` (import paths,
-    e.g. ``pipeline.sim.robot.gamma_matrix`` or a dataclass field ``…Terms.M_hat``)."""
+    """Mark ``fn`` as the check of equation ``eq`` against the code at ``targets`` (import
+    paths, e.g. ``pipeline.sim.robot.gamma_matrix`` or a dataclass field ``…Terms.M_hat``):
+    the ``Check`` is attached as ``fn.check``; nothing is registered."""
 
     def deco(fn: Callable[[], Outcome]) -> Callable[[], Outcome]:
-        REGISTRY.append(Check(eq, title, tuple(targets), fn))
+        fn.check = Check(eq, title, tuple(targets), fn)
         return fn
 
     return deco
@@ -132,22 +131,6 @@ def run_check(c: Check) -> CheckResult:
     ok = math.isfinite(out.max_abs_diff) and out.max_abs_diff <= out.tol
     return CheckResult(c, out.inputs, out.max_abs_diff, out.tol, "PASS" if ok else "FAIL",
                        out.note)
-
-
-def all_checks() -> list[Check]:
-    # Importing the modules registers their checks (once).
-    from pipeline.reports import (  # noqa: F401
-        checks_analysis,
-        checks_loop,
-        checks_model,
-        checks_step,
-    )
-
-    return list(REGISTRY)
-
-
-def run_checks() -> list[CheckResult]:
-    return [run_check(c) for c in all_checks()]
 
 
 # -- shared inputs ------------------------------------------------------------------------

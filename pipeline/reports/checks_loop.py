@@ -4,10 +4,21 @@ integrators against their closed forms, the saturations, the guidance and the co
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import scipy.linalg as sla
 
-from pipeline.reports.checks_base import Outcome, check, fmt, maxdiff, random_state, rng, robot
+from pipeline.reports.checks_base import (
+    Check,
+    Outcome,
+    check,
+    fmt,
+    maxdiff,
+    random_state,
+    rng,
+    robot,
+)
 from pipeline.reports.checks_base import spec as check_spec
 from pipeline.spec import Limits
 
@@ -272,3 +283,28 @@ def _coverage() -> Outcome:
             total += 1
     return Outcome(f"{total} point tests: 4 random camera poses × {len(tgt.points)} target points",
                    float(mism), 0.0, "number of points classified differently")
+
+
+# This module's checks, in the order the cross-check shows them: an explicit list, read by
+# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+CHECKS = (
+    _coriolis,
+    _damping,
+    _stiffness,
+    _com_coupling,
+    _posture,
+    _feedforward,
+    _block_gains,
+    _com_step,
+    _attitude_error,
+    _explicit,
+    _imex,
+    _saturate,
+    _guidance,
+    _coverage,
+)
+
+
+def checks() -> Iterator[Check]:
+    """This module's checks (``CHECKS``)."""
+    return (fn.check for fn in CHECKS)

@@ -5,11 +5,13 @@ of the placements, inverses against NumPy, the transformed dynamics against thei
 from __future__ import annotations
 
 import inspect
+from collections.abc import Iterator
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.reports.checks_base import (
+    Check,
     Outcome,
     check,
     code,
@@ -295,3 +297,30 @@ def _conditioning_scale() -> Outcome:
     d = max(abs(conditioning_scale(s, c) - _ramp(s, k.low, k.high, k.floor)) for s in sig)
     return Outcome(f"101 s_min_G in [0, {2 * k.high:g}], spec {spec().name} (low {k.low}, "
                    f"high {k.high}, floor {k.floor})", d, 1e-15)
+
+
+# This module's checks, in the order the cross-check shows them: an explicit list, read by
+# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+CHECKS = (
+    _camera_twist,
+    _j_bar_v,
+    _j_oplus,
+    _g_wb,
+    _gamma_rows,
+    _gamma_inverse,
+    _damped_pinv,
+    _damped_reconstruction,
+    _gamma_dot,
+    _m_hat_structure,
+    _c_hat,
+    _m_breve,
+    _c_breve,
+    _sigma_min_and_cond,
+    _gamma_ramp,
+    _conditioning_scale,
+)
+
+
+def checks() -> Iterator[Check]:
+    """This module's checks (``CHECKS``)."""
+    return (fn.check for fn in CHECKS)

@@ -5,10 +5,12 @@ per-mode multipliers and dt*, and one step of the compiled loop against its re-a
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 from scipy.optimize import brentq
 
-from pipeline.reports.checks_base import Outcome, check, fmt, maxdiff, random_state, robot
+from pipeline.reports.checks_base import Check, Outcome, check, fmt, maxdiff, random_state, robot
 from pipeline.reports.checks_base import spec as check_spec
 
 
@@ -154,3 +156,19 @@ def _mission_step() -> Outcome:
     return Outcome(f"spec {check_spec().name}, explicit and imex, steps 0, 30, …, 120 "
                    f"({sat_steps} of 10 with a limit active)", max(diffs), 1e-10,
                    "largest difference over v̆, v_c, v and q")
+
+
+# This module's checks, in the order the cross-check shows them: an explicit list, read by
+# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+CHECKS = (
+    _damping_rates,
+    _discrete_map,
+    _amplification,
+    _critical_step,
+    _mission_step,
+)
+
+
+def checks() -> Iterator[Check]:
+    """This module's checks (``CHECKS``)."""
+    return (fn.check for fn in CHECKS)

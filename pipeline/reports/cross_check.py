@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pipeline.logs import atomic_write_text
-from pipeline.reports.checks_base import CheckResult, defining_qualname, run_checks
+from pipeline.reports.checks_base import CheckResult, defining_qualname
+from pipeline.reports.equation_checks import run_checks
 from pipeline.reports.sources import (
     EQUATIONS_MD,
     CodeIndex,
