@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 
-from pipeline.reports.checks_base import Check, Outcome, check, rng
+from pipeline.reports.checks_base import Outcome, check, rng
 
 
 @check("25", "lag-1 autocorrelation vs an explicit loop over the definition; −1 for an "
@@ -76,8 +75,3 @@ CHECKS = (
     _abs_cos,
     _velocity_jumps,
 )
-
-
-def checks() -> Iterator[Check]:
-    """This module's checks (``CHECKS``)."""
-    return (fn.check for fn in CHECKS)

@@ -4,13 +4,10 @@ integrators against their closed forms, the saturations, the guidance and the co
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 import scipy.linalg as sla
 
 from pipeline.reports.checks_base import (
-    Check,
     Outcome,
     check,
     fmt,
@@ -303,8 +300,3 @@ CHECKS = (
     _guidance,
     _coverage,
 )
-
-
-def checks() -> Iterator[Check]:
-    """This module's checks (``CHECKS``)."""
-    return (fn.check for fn in CHECKS)

@@ -5,13 +5,11 @@ of the placements, inverses against NumPy, the transformed dynamics against thei
 from __future__ import annotations
 
 import inspect
-from collections.abc import Iterator
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.reports.checks_base import (
-    Check,
     Outcome,
     check,
     code,
@@ -319,8 +317,3 @@ CHECKS = (
     _gamma_ramp,
     _conditioning_scale,
 )
-
-
-def checks() -> Iterator[Check]:
-    """This module's checks (``CHECKS``)."""
-    return (fn.check for fn in CHECKS)

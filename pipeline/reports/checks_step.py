@@ -5,12 +5,10 @@ per-mode multipliers and dt*, and one step of the compiled loop against its re-a
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 from scipy.optimize import brentq
 
-from pipeline.reports.checks_base import Check, Outcome, check, fmt, maxdiff, random_state, robot
+from pipeline.reports.checks_base import Outcome, check, fmt, maxdiff, random_state, robot
 from pipeline.reports.checks_base import spec as check_spec
 
 
@@ -167,8 +165,3 @@ CHECKS = (
     _critical_step,
     _mission_step,
 )
-
-
-def checks() -> Iterator[Check]:
-    """This module's checks (``CHECKS``)."""
-    return (fn.check for fn in CHECKS)
