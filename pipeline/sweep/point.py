@@ -4,9 +4,9 @@ Runs on a worker. The log goes to ``ROOT/<point>/run.parquet`` and the analysis 
 (``analysis.json``, ``directions.parquet``), all written atomically.
 
 Cache: a log whose metadata carries the point's spec hash and the current code version is
-reused, whether ``complete`` or ``failed`` (the simulation is deterministic: the same spec on
-the same code diverges again at the same step). An ``analysis.json`` is reused when it is not
-older than the log and names the same spec hash and code version.
+reused, whether ``complete``, ``failed`` or ``diverged`` (the simulation is deterministic: the
+same spec on the same code fails or diverges again at the same step). An ``analysis.json``
+is reused when it is not older than the log and names the same spec hash and code version.
 
 Concurrency: the simulate-and-analyse part runs under an exclusive ``flock`` on
 ``ROOT/<point>/.lock``, so two sweeps sharing a point (or a rescheduled task meeting its
@@ -67,7 +67,7 @@ def cached_log(log: Path, spec: Spec) -> LogMeta | None:
     except LogError:
         return None
     if (meta.spec_hash != spec.spec_hash or meta.code_version != code_version()
-            or meta.status not in ("complete", "failed")):
+            or meta.status not in ("complete", "failed", "diverged")):
         return None
     return meta
 
