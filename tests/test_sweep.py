@@ -436,3 +436,10 @@ def test_the_bracket_judges_points_far_from_their_crossing_and_lists_the_near_on
                           "bus_critical_I_zz": [0.03] * 3})
     b = stability_bracket(table, "I_zz_bus", "bus_rate_lag1", "bus_critical_I_zz", "below")
     assert b["holds"] and b["far_agree"] and b["n_far"] == 2
+
+
+def test_a_nan_lag1_is_no_evidence_and_no_bracket_holds_on_it():
+    dts = [0.005, 0.01, 0.015, 0.0175, 0.02, 0.03]
+    lags = [0.99, 0.98, 0.97, -0.9, float("nan"), -0.99]
+    b = stability_bracket(_dt_table(dts, lags, [0.0156] * 6))
+    assert b["undefined_lag1"] == [0.02] and not b["holds"] and not b["far_agree"]

@@ -100,7 +100,8 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
     ``predicted`` is the interval between the grid points that bracket the predicted crossing
     (the median over the points; its spread is ``dt_star_range``). ``holds`` is true when
     the sign changes exactly once and every point's predicted crossing lies in the measured
-    interval (``lo < crossing <= hi``). The keys say ``dt_star`` whatever the column.
+    interval (``lo < crossing <= hi``). The keys say ``dt_star`` whatever the column. A
+    complete point with a NaN lag-1 (``undefined_lag1``) makes neither hold.
 
     Point by point: the prediction is period-2 on the ``unstable`` side of the point's
     crossing (``above`` it for a time step, ``below`` it for a bus inertia), the measurement
@@ -113,7 +114,10 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
         if col not in df.columns:
             raise LogError(f"sweep table has no column {col!r} (columns: "
                            f"{', '.join(df.columns)})")
-    ok = df[(df["status"] == "complete") & df[lag].notna()].sort_values(key)
+    complete = df[df["status"] == "complete"]
+    # A complete point whose lag-1 is NaN is no evidence either way, and no bracket holds on it.
+    undefined = [float(v) for v in complete.loc[complete[lag].isna(), key]]
+    ok = complete[complete[lag].notna()].sort_values(key)
     x = ok[key].to_numpy(float)
     lag_values = ok[lag].to_numpy(float)
     stars = ok[predicted].dropna().to_numpy(float)
@@ -124,7 +128,7 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
     predicted_bracket = (float(below.max()) if below.size else None,
                          float(above.min()) if above.size else None)
     measured = flips[0] if len(flips) == 1 else None
-    holds = bool(measured is not None and stars.size
+    holds = bool(measured is not None and stars.size and not undefined
                  and all(measured[0] < s <= measured[1] for s in stars))
     crossing = ok[predicted].to_numpy(float)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -140,6 +144,8 @@ def stability_bracket(sweep_table: pd.DataFrame | Path | str, key: str = "missio
         "flips": flips, "measured": measured, "dt_star": dt_star,
         "dt_star_range": (float(stars.min()), float(stars.max())) if stars.size else None,
         "predicted": predicted_bracket, "holds": holds,
-        "n_far": int(judged.sum()), "far_agree": bool(judged.any() and agree[judged].all()),
+        "n_far": int(judged.sum()),
+        "far_agree": bool(judged.any() and agree[judged].all() and not undefined),
+        "undefined_lag1": undefined,
         "far_disagree": [float(v) for v in x[judged & ~agree]], "near": near,
     }
