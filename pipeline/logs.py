@@ -381,7 +381,7 @@ def verify_log(path: Path | str) -> VerifiedLog:
 def _check_rows(path: Path, dt: float) -> None:
     """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group."""
     pf = _open(path)
-    names = [c for c in pf.schema_arrow.names]
+    names = pf.schema_arrow.names
     _check_columns(path, pf, ["step", "t"])
     offset = 0
     for rg in range(pf.num_row_groups):

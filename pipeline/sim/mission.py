@@ -218,9 +218,10 @@ class Mission:
             # Copies: the buffer is reused for the next chunk.
             out({k: np.array(v) for k, v in log_columns(rows[:count], self.dt, first).items()})
 
-        def result(status: str, step: int | None = None, error: str = "") -> MissionResult:
+        def result(status: str, rows_logged: int, step: int | None = None,
+                   error: str = "") -> MissionResult:
             cols = None if sink is not None else concat_columns(parts, list(parts[0]))
-            return MissionResult(cols, status, step, error, warned, rows=n_rows)
+            return MissionResult(cols, status, step, error, warned, rows=rows_logged)
 
         s0 = self.initial_state()
         state = pack(STATE_FIELDS, {"q": s0.q, "v": s0.v, "v_c": s0.v_c,
@@ -249,15 +250,13 @@ class Mission:
                     why = "non-finite state"
                 if not finite:
                     flush(i)
-                    n_rows = k
-                    return result("failed", k, f"step {k}: {why}")
+                    return result("failed", k, k, f"step {k}: {why}")
                 if explicit and not warned and rows[i, _DT_MU] > 2:
                     warned.append(stability_warning(k, float(rows[i, _DT_MU]), self.dt))
                 clipped = clipped + 1 if rows[i, _SAT_V_MAX] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
                     flush(i + 1)
-                    n_rows = k + 1
-                    return result("diverged", k, divergence_message(
+                    return result("diverged", k + 1, k, divergence_message(
                         k, float(rows[i, _DT_MU]), self.dt, self.spec.controller.integrator))
                 if i + 1 == size and k + 1 < n:
                     flush(size)
@@ -266,8 +265,7 @@ class Mission:
                     bar.update(100)
             bar.update(n - bar.n)
         flush(n - first)
-        n_rows = n
-        return result("complete")
+        return result("complete", n)
 
 
 def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, np.ndarray]:
