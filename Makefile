@@ -9,7 +9,6 @@ REPORTS := generated_reports
 # unbounded mission ends diverged by design and is run by the claims (`expect: diverged`).
 MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
-SOURCES := $(shell find pipeline -name '*.py' -o -name '*.j2') $(wildcard specs/*.yaml) $(wildcard specs/robots/*)
 
 .PHONY: all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
 
@@ -18,7 +17,7 @@ SOURCES := $(shell find pipeline -name '*.py' -o -name '*.j2') $(wildcard specs/
 # ends with the claims' own code (1: make prints "Error 1"; GNU make itself exits 2 whenever a
 # recipe fails, its only code for that).
 all: $(STAMP)
-	@$(PY) -m pipeline claims --claims specs/claims.yaml --out $(REPORTS); rc=$$?; \
+	@$(PY) -m pipeline claims --claims claims --out $(REPORTS); rc=$$?; \
 	$(MAKE) --no-print-directory report || exit $$?; exit $$rc
 
 setup: $(STAMP)
@@ -39,37 +38,31 @@ lock:
 		| grep -v '^-e'; } > constraints.txt.new && mv constraints.txt.new constraints.txt
 	rm -rf .venv-lock
 
-$(LOGS)/%/run.parquet: $(SOURCES) | $(STAMP)
-	$(PY) -m pipeline run $* --out $(LOGS)
+# Make's timestamps decide nothing here: each command asks pipeline/provenance whether its
+# artefact is current (a log: the simulator's sources, the spec, the robot file and the
+# numerical libraries; an analysis: its logs and the analysis' sources; the reports: their
+# inputs and templates), says "up to date" and reuses it, or makes it.
+runs: $(STAMP)
+	$(PY) -m pipeline run $(MISSIONS) --out $(LOGS)
 
-runs: $(foreach m,$(MISSIONS),$(LOGS)/$(m)/run.parquet)
-
-# An analysis is redone when its logs are newer (and a log when the sources are); `claims`
-# writes the same records, so after it these are up to date.
-analyses: $(foreach m,$(MISSIONS),$(REPORTS)/$(m)/analysis.json)
-
-$(REPORTS)/nominal/analysis.json $(REPORTS)/omega_ripple_imex/analysis.json \
-		$(REPORTS)/omega_ripple_reach/analysis.json: \
-		$(REPORTS)/%/analysis.json: $(LOGS)/%/run.parquet $(LOGS)/omega_ripple_dt010/run.parquet
-	$(PY) -m pipeline analyze $< --against $(LOGS)/omega_ripple_dt010/run.parquet --out $(REPORTS)
-
-$(REPORTS)/servicer_nominal/analysis.json $(REPORTS)/servicer_imex/analysis.json: \
-		$(REPORTS)/%/analysis.json: $(LOGS)/%/run.parquet $(LOGS)/servicer_dt010/run.parquet
-	$(PY) -m pipeline analyze $< --against $(LOGS)/servicer_dt010/run.parquet --out $(REPORTS)
-
-$(REPORTS)/omega_ripple_dt010/analysis.json $(REPORTS)/servicer_dt010/analysis.json: \
-		$(REPORTS)/%/analysis.json: $(LOGS)/%/run.parquet
-	$(PY) -m pipeline analyze $< --out $(REPORTS)
+# mission:against (empty: analysed alone)
+ANALYSES := nominal:omega_ripple_dt010 omega_ripple_imex:omega_ripple_dt010 \
+	omega_ripple_reach:omega_ripple_dt010 omega_ripple_dt010: \
+	servicer_nominal:servicer_dt010 servicer_imex:servicer_dt010 servicer_dt010:
+analyses: runs
+	@for pair in $(ANALYSES); do m=$${pair%%:*}; a=$${pair#*:}; \
+		$(PY) -m pipeline analyze $(LOGS)/$$m/run.parquet \
+			$${a:+--against $(LOGS)/$$a/run.parquet} --out $(REPORTS) || exit $$?; done
 
 report: analyses
 	$(PY) -m pipeline report --out $(REPORTS)
 
 claims: $(STAMP)
-	$(PY) -m pipeline claims --claims specs/claims.yaml --out $(REPORTS)
+	$(PY) -m pipeline claims --claims claims --out $(REPORTS)
 
 # The claim gate of CI: the same claims on the short missions.
 claims-ci: $(STAMP)
-	$(PY) -m pipeline claims --claims specs/claims_ci.yaml --out $(REPORTS)/ci
+	$(PY) -m pipeline claims --claims claims_ci --out $(REPORTS)/ci
 
 test: $(STAMP)
 	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; exit $$rc
@@ -79,7 +72,7 @@ lint: $(STAMP)
 
 # The default dt sweep (claim C12): nominal, 20 s missions, dt from 0.005 to 0.04 s across
 # dt* = 2/μ_max = 0.0156 s -> $(REPORTS)/sweeps/nominal_dt/sweep.parquet. See docs/sweeps.md.
-# The bus-inertia sweep (claim C27) runs with the claims (specs/claims.yaml, sweeps.inertia).
+# The bus-inertia sweep (claim C27) runs with the claims (pipeline/specs/claims.yaml, sweeps.inertia).
 SWEEP_DTS := 0.005,0.01,0.015,0.0175,0.02,0.0225,0.025,0.03,0.04
 SWEEP_WORKERS ?= 2
 sweep: $(STAMP)
@@ -90,10 +83,10 @@ bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)
 
 baselines: $(STAMP)
-	$(PY) -m pipeline.reports.baselines check
+	$(PY) -m pipeline.claims.baselines check
 
 repin: $(STAMP)
-	$(PY) -m pipeline.reports.baselines repin
+	$(PY) -m pipeline.claims.baselines repin
 
 # Compiled kernels: all but the newest cache folder (one per version of pipeline/sim/*.py).
 clean:

@@ -10,24 +10,48 @@ import argparse
 import sys
 from pathlib import Path
 
-from pipeline.errors import PipelineError
+from pipeline.errors import PipelineError, RunFailed
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
-    from pipeline.sim.run import run_spec
+    from pipeline.paths import display_path
+    from pipeline.provenance.validity import current_log
+    from pipeline.sim.run import log_path, run_spec
     from pipeline.spec import load_spec
 
-    spec = load_spec(a.spec)
-    out = run_spec(spec, a.out, progress=sys.stderr.isatty())
-    for w in out.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    print(f"{spec.name}: {out.n_steps} steps, {out.status} -> {out.path}")
+    specs = [load_spec(s) for s in a.spec]  # every spec checked before anything runs
+    for spec in specs:
+        path = log_path(spec, Path(a.out))
+        meta = None if a.force else current_log(path, spec)
+        if meta is not None:
+            print(f"{spec.name}: up to date ({meta.status}, same spec, robot and simulator) "
+                  f"-> {display_path(path)}")
+            if meta.status != "complete":  # the same outcome as running it again
+                raise RunFailed(f"{spec.name}: run {meta.status} at {meta.error}; log marked "
+                                f"{meta.status}: {display_path(path)}")
+            continue
+        out = run_spec(spec, a.out, progress=sys.stderr.isatty())
+        for w in out.warnings:
+            print(f"warning: {w}", file=sys.stderr)
+        print(f"{spec.name}: {out.n_steps} steps, {out.status} -> {display_path(out.path)}")
     return 0
 
 
 def _cmd_analyze(a: argparse.Namespace) -> int:
     from pipeline.analysis.cli import analyze_command
+    from pipeline.logs import verify_log
+    from pipeline.paths import display_path
+    from pipeline.provenance.validity import current_analysis
 
+    if a.window_start is None and not a.force:
+        log = verify_log(a.log)
+        other = verify_log(a.against) if a.against else None
+        path = Path(a.out) / log.spec.name / "analysis.json"
+        if current_analysis(path, log.path, log.meta,
+                            None if other is None else (other.path, other.meta)):
+            print(f"{log.spec.name}: up to date (same log and analysis code) -> "
+                  f"{display_path(path)}")
+            return 0
     return analyze_command(Path(a.log), Path(a.against) if a.against else None, Path(a.out),
                            a.window_start)
 
@@ -35,14 +59,27 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
 def _cmd_report(a: argparse.Namespace) -> int:
     from pipeline.reports.render import render_all
 
-    render_all(Path(a.out))
+    render_all(Path(a.out), force=a.force)
     return 0
 
 
 def _cmd_claims(a: argparse.Namespace) -> int:
-    from pipeline.reports.claims import claims_command
+    from pipeline.claims.evaluate import run_claims, summary_lines
+    from pipeline.paths import display_path
+    from pipeline.reports.claims_page import render_claims
 
-    return claims_command(Path(a.claims), Path(a.out))
+    outcome = run_claims(a.claims, Path(a.out))
+    page = render_claims(outcome, Path(a.out))
+    for line in summary_lines(outcome):
+        print(line)
+    for r in outcome.results:
+        if r.status == "FAIL":
+            print(f"claim {r.claim.id} fails: {r.claim.statement}", file=sys.stderr)
+        elif r.status == "NOW HOLDS":
+            print(f"claim {r.claim.id} now holds: promote it to expect: hold "
+                  f"({r.claim.statement})", file=sys.stderr)
+    print(f"-> {display_path(page)}")
+    return outcome.exit_code
 
 
 def _cmd_sweep(a: argparse.Namespace) -> int:
@@ -62,8 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="simulate a mission spec into DIR/<name>/run.parquet")
-    r.add_argument("spec", help="spec name under specs/ or path to a .yaml file")
+    r.add_argument("spec", nargs="+",
+                   help="spec names (on the spec search path: beside, BREVE_SPEC_PATH, the "
+                        "shipped specs) or paths to .yaml files")
     r.add_argument("--out", default="logs", help="log folder (default: logs)")
+    r.add_argument("--force", action="store_true",
+                   help="run even when the log is current (same spec, robot and simulator)")
     r.set_defaults(func=_cmd_run)
 
     an = sub.add_parser("analyze", help="analyse a log into DIR/<name>/analysis.json")
@@ -72,14 +113,20 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--out", default="generated_reports")
     an.add_argument("--window-start", type=float, default=None,
                     help="analysis window start in seconds (default: half the mission)")
+    an.add_argument("--force", action="store_true",
+                    help="analyse even when the record is current (same logs and analysis code)")
     an.set_defaults(func=_cmd_analyze)
 
     rp = sub.add_parser("report", help="render the reports under generated_reports/")
     rp.add_argument("--out", default="generated_reports")
+    rp.add_argument("--force", action="store_true",
+                    help="render even when the reports are current (same inputs and renderer)")
     rp.set_defaults(func=_cmd_report)
 
     c = sub.add_parser("claims", help="evaluate the claims register")
-    c.add_argument("--claims", default="specs/claims.yaml")
+    c.add_argument("--claims", default="claims",
+                   help="claims register: a name on the spec search path or a .yaml path "
+                        "(default: claims, the shipped register)")
     c.add_argument("--out", default="generated_reports")
     c.set_defaults(func=_cmd_claims)
 

@@ -20,7 +20,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.errors import LogDamaged, LogError, OutputError, SpecError
-from pipeline.spec import Spec, build_spec, canonical_hash, file_hash
+from pipeline.paths import find_on_search_path
+from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
+from pipeline.spec import Spec, build_spec, canonical_hash
 
 VECTOR_COLUMNS = {
     "q": 13, "v": 12, "v_c": 3, "v_breve": 9, "v_breve_des": 9, "x_tilde": 9,
@@ -29,13 +31,11 @@ SCALAR_COLUMNS = (
     "t", "tau", "s_min_G", "kappa_G", "s_min_J", "kappa_J", "gamma", "dt_mu_max",
     "pointing_err_deg", "boresight_err_deg", "com_err", "coverage",
 )
-META_KEYS = ("spec", "spec_hash", "code_version", "robot_file", "robot_hash", "status", "rows",
+META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "status", "rows",
              "versions")
 # Columns that may hold +inf: a condition number at an exact singularity (eq. 19). Every other
 # numeric column of a log must be finite.
 MAY_BE_INFINITE = ("kappa_G", "kappa_J")
-# The numerical libraries whose versions a log records (a change may move the last bits).
-LIBRARIES = ("numpy", "scipy", "pinocchio", "numba", "pyarrow")
 ROW_GROUP = 65_536
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -45,7 +45,7 @@ os.umask(_UMASK)
 class LogMeta:
     spec: dict
     spec_hash: str
-    code_version: str
+    sim_version: str  # the simulator's code and libraries (pipeline.provenance)
     robot_file: str
     robot_hash: str
     status: str
@@ -187,30 +187,16 @@ def log_metadata(meta: LogMeta) -> dict[str, str]:
     return {
         "pipeline.spec": json.dumps(meta.spec, sort_keys=True),
         "pipeline.spec_hash": meta.spec_hash,
-        "pipeline.code_version": meta.code_version,
+        "pipeline.sim_version": meta.sim_version,
         "pipeline.robot_file": meta.robot_file,
         "pipeline.robot_hash": meta.robot_hash,
         "pipeline.status": meta.status,
         "pipeline.failed_step": "" if meta.failed_step is None else str(meta.failed_step),
         "pipeline.error": meta.error,
         "pipeline.rows": str(meta.rows),
-        "pipeline.versions": json.dumps(meta.versions or library_versions(), sort_keys=True),
+        "pipeline.versions": json.dumps(meta.versions or library_versions(SIM_LIBRARIES),
+                                        sort_keys=True),
     }
-
-
-def library_versions() -> dict[str, str]:
-    """The versions of Python and of the numerical libraries (``LIBRARIES``) in this process."""
-    import importlib.metadata as md
-    import platform
-
-    names = {"pinocchio": "pin"}  # the distribution that provides the module
-    out = {"python": platform.python_version()}
-    for lib in LIBRARIES:
-        try:
-            out[lib] = md.version(names.get(lib, lib))
-        except md.PackageNotFoundError:
-            out[lib] = "absent"
-    return out
 
 
 def _open(path: Path) -> pq.ParquetFile:
@@ -251,7 +237,7 @@ def read_meta(path: Path) -> LogMeta:
     if not isinstance(spec, dict) or not isinstance(versions, dict):
         raise LogError(f"{path}: metadata key pipeline.spec or pipeline.versions is not a "
                        f"mapping")
-    return LogMeta(spec, md["pipeline.spec_hash"], md["pipeline.code_version"],
+    return LogMeta(spec, md["pipeline.spec_hash"], md["pipeline.sim_version"],
                    md["pipeline.robot_file"], md["pipeline.robot_hash"], md["pipeline.status"],
                    failed_step, md.get("pipeline.error", ""), rows, versions)
 
@@ -334,7 +320,9 @@ def verify_log(path: Path | str) -> VerifiedLog:
       run, the steps before the failing one of a ``failed`` run, up to and including the
       divergence step of a ``diverged`` one;
     - ``step`` is 0, 1, …, n − 1 and ``t`` is step·dt, as the simulator writes them;
-    - the robot file on disk hashes to ``pipeline.robot_hash``: the analysis rebuilds Γ from it;
+    - a robot file on disk hashes to ``pipeline.robot_hash``: the analysis rebuilds Γ from it.
+      It is looked for at the recorded ``pipeline.robot_file``, then as the spec's
+      ``robot.file`` beside the log and on the spec search path (logs move between machines);
     - every numeric column is finite, but the condition numbers (``MAY_BE_INFINITE``), which
       may be +inf at an exact singularity and never NaN.
 
@@ -353,7 +341,8 @@ def verify_log(path: Path | str) -> VerifiedLog:
         raise _damaged(path, "spec hash", f"the metadata spec hashes to {digest[:12]}…, the "
                        f"log records {meta.spec_hash[:12]}…")
     try:
-        spec = build_spec(str(meta.spec.get("name", path.parent.name)), content, path)
+        spec = build_spec(str(meta.spec.get("name", path.parent.name)), content, path,
+                          find_robot=False)
     except SpecError as exc:
         raise _damaged(path, "spec", f"the metadata spec is not a valid spec ({exc})") from None
     n = num_rows(path)
@@ -368,14 +357,24 @@ def verify_log(path: Path | str) -> VerifiedLog:
         raise _damaged(path, "row count", f"{n} rows for a {meta.status} run (expected "
                        f"{expected[meta.status]}: {spec.n_steps} steps, failed step "
                        f"{meta.failed_step})")
-    robot = spec.robot_path
-    if not robot.is_file():
-        raise LogError(f"{path}: its robot file {robot} is not on disk")
-    if file_hash(robot) != meta.robot_hash:
-        raise _damaged(path, "robot file", f"{robot} on disk is not the robot this log was "
-                       f"run with (its hash differs from pipeline.robot_hash)")
+    spec._robot_path = _recorded_robot(path, meta, spec)
     _check_rows(path, spec.mission.dt)
     return VerifiedLog(path, meta, spec)
+
+
+def _recorded_robot(path: Path, meta: LogMeta, spec: Spec) -> Path:
+    """The robot file this log was run with, found by its content hash."""
+    recorded = Path(meta.robot_file)
+    candidates = [recorded] if recorded.is_absolute() else [Path.cwd() / recorded]
+    candidates.append(find_on_search_path(spec.robot.file, path.parent))
+    found = [c for c in candidates if c is not None and c.is_file()]
+    for cand in found:
+        if file_digest(cand) == meta.robot_hash:
+            return cand.resolve()
+    if not found:
+        raise LogError(f"{path}: its robot file {meta.robot_file} is not on disk")
+    raise _damaged(path, "robot file", f"{found[0]} on disk is not the robot this log was run "
+                   f"with (its hash differs from pipeline.robot_hash)")
 
 
 def _check_rows(path: Path, dt: float) -> None:

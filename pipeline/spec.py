@@ -1,9 +1,13 @@
-"""Mission specs: YAML files under ``specs/`` loaded into one validated, resolved object.
+"""Mission specs: YAML files loaded into one validated, resolved object.
 
-A spec may ``extends:`` another spec by name (looked up beside it, then in the project's
-``specs/``); the child's keys override the parent's, mappings merging recursively. The
-resolved spec is hashed canonically: the same content gives the same hash whatever the key
-order or the file it came from (the name and ``extends`` are not part of the content).
+A spec is a path to a YAML file or a bare name looked up on the spec search path
+(:mod:`pipeline.paths`: the user's ``BREVE_SPEC_PATH``, then the specs shipped in
+``pipeline/specs/``). A spec may ``extends:`` another spec by name (looked up beside it first);
+the child's keys override the parent's, mappings merging recursively. ``robot.file`` is looked
+up the same way, beside the spec first. The resolved spec is hashed canonically: the same
+content gives the same hash whatever the key order or the file it came from (the name and
+``extends`` are not part of the content); the robot file's content is keyed by its own hash
+(:mod:`pipeline.provenance`).
 """
 
 from __future__ import annotations
@@ -14,13 +18,20 @@ import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from pipeline.errors import SpecError
+from pipeline.paths import find_on_search_path, spec_search_path
 from pipeline.yamlfile import read_yaml
 
-PROJECT_ROOT = Path(__file__).resolve().parent.parent
-SPECS_DIR = PROJECT_ROOT / "specs"
 ROBOT_SUFFIXES = (".urdf", ".xml", ".mjcf")  # URDF, or MJCF (MuJoCo's XML)
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
@@ -43,14 +54,14 @@ class DampedInverse(_Block):
 
 
 class RobotSpec(_Block):
-    """The robot: a URDF or MJCF file (relative to ``specs/``), its camera frame, q̄ and the
-    damped inverse. ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body
-    on the free joint (the bus and all that is fixed to it) about its own CoM, its mass and
-    CoM unchanged: the knob of the bus-inertia sweep."""
+    """The robot: a URDF or MJCF file (looked up beside the spec, then on the spec search
+    path), its camera frame, q̄ and the damped inverse. ``bus_inertia_scale`` multiplies the
+    rotational inertia of the rigid body on the free joint (the bus and all that is fixed to
+    it) about its own CoM, its mass and CoM unchanged: the knob of the bus-inertia sweep."""
 
     file: str = "robots/seed_ur3_box.xml"
     camera_frame: str = "camera"
-    # The seed robot's inspection reach (specs/nominal.yaml says why).
+    # The seed robot's inspection reach (pipeline/specs/nominal.yaml says why).
     q_bar: list[Finite] = Field(default=[0.0, -0.367, -1.763, -0.993, -5.95, 0.0])
     damped_inverse: DampedInverse = DampedInverse()
     bus_inertia_scale: Positive = 1.0
@@ -126,7 +137,7 @@ class BaseBlock(_Block):
 
 class Limits(_Block):
     """Rate and acceleration saturations (rad/s, m/s, and per second) and the clip v_max.
-    Defaults: the seed robot's (specs/nominal.yaml cites them)."""
+    Defaults: the seed robot's (pipeline/specs/nominal.yaml cites them)."""
 
     omega_b_rate: Positive = 0.5
     omega_b_acc: Positive = 10.00466
@@ -196,10 +207,16 @@ class Spec(_Block):
     target: Target = Target()
     camera: Camera = Camera()
     config_sampling: ConfigSampling = ConfigSampling()
+    # The folder of the spec file (where its own files are looked up first) and the robot file
+    # found from it; neither is content: the robot counts by its hash (provenance).
+    _here: Path | None = PrivateAttr(default=None)
+    _robot_path: Path | None = PrivateAttr(default=None)
 
     @property
     def robot_path(self) -> Path:
-        return SPECS_DIR / self.robot.file
+        if self._robot_path is None:
+            raise SpecError(f"spec {self.name}: robot file {self.robot.file} not resolved")
+        return self._robot_path
 
     def content(self) -> dict[str, Any]:
         """The spec's content: everything but its name."""
@@ -223,10 +240,6 @@ def canonical_hash(obj: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def file_hash(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
 def deep_merge(base: dict, over: dict) -> dict:
     out = dict(base)
     for k, v in over.items():
@@ -237,25 +250,29 @@ def deep_merge(base: dict, over: dict) -> dict:
     return out
 
 
-def resolve_spec_path(spec: str | Path) -> Path:
-    """A spec argument is a path to a YAML file, or a bare name under ``specs/``."""
-    p = Path(spec)
+def resolve_spec_path(spec: str | Path, here: Path | None = None) -> Path:
+    """A spec argument is a path to a YAML file (relative to ``here``, the folder of the file
+    that names it, else to the working directory), or a bare name on the spec search path
+    (beside ``here`` first)."""
+    p = Path(spec).expanduser()
     if p.suffix in (".yaml", ".yml"):
-        if not p.is_file():
-            raise SpecError(f"{p}: spec file not found")
-        return p
-    return _named_spec(str(spec), SPECS_DIR, Path("spec argument"))
+        cands = [p] if p.is_absolute() or here is None else [Path(here) / p, p]
+        for cand in cands:
+            if cand.is_file():
+                return cand
+        raise SpecError(f"{p}: spec file not found")
+    return _named_spec(str(spec), here, Path("spec argument"))
 
 
-def _named_spec(name: str, here: Path, referrer: Path) -> Path:
+def _named_spec(name: str, here: Path | None, referrer: Path) -> Path:
     if not _NAME_RE.match(name) or name.startswith("."):
-        raise SpecError(f"{referrer}: spec name {name!r} escapes specs/ (use a bare name)")
-    for folder in (here, SPECS_DIR):
-        cand = folder / f"{name}.yaml"
-        if cand.is_file():
-            return cand
-    where = SPECS_DIR if here == SPECS_DIR else f"{here} or {SPECS_DIR}"
-    raise SpecError(f"{referrer}: spec {name!r} not found in {where}")
+        raise SpecError(f"{referrer}: spec name {name!r} is not a bare name (a path must end "
+                        f"in .yaml)")
+    found = find_on_search_path(f"{name}.yaml", here)
+    if found is None:
+        where = ", ".join(str(f) for f in spec_search_path(here))
+        raise SpecError(f"{referrer}: spec {name!r} not found in {where}")
+    return found
 
 
 def _read_yaml(path: Path) -> dict:
@@ -278,8 +295,11 @@ def raw_spec(path: Path, _chain: tuple[Path, ...] = ()) -> dict:
     return deep_merge(raw_spec(parent_path, (*_chain, path)), data)
 
 
-def build_spec(name: str, data: dict, source: Path | str) -> Spec:
-    """Validate a raw mapping into a Spec; errors name the field and the source."""
+def build_spec(name: str, data: dict, source: Path | str, here: Path | None = None,
+               find_robot: bool = True) -> Spec:
+    """Validate a raw mapping into a Spec; errors name the field and the source. Its robot
+    file is looked up from ``here`` (the spec file's folder), then on the search path (unless
+    ``find_robot`` is false: a log's spec finds its robot by the log's hash)."""
     try:
         spec = Spec.model_validate({**data, "name": name})
     except ValidationError as exc:
@@ -289,26 +309,29 @@ def build_spec(name: str, data: dict, source: Path | str) -> Spec:
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
         raise SpecError(f"{source}: field {field}: {msg}") from None
-    _check_robot(spec, source)
+    spec._here = here
+    if find_robot:
+        spec._robot_path = _find_robot(spec, source, here)
     return spec
 
 
-def _check_robot(spec: Spec, source: Path | str) -> None:
-    root = SPECS_DIR.resolve()
-    p = (SPECS_DIR / spec.robot.file).resolve()
-    if root not in p.parents:
-        raise SpecError(f"{source}: field robot.file: {spec.robot.file!r} escapes specs/")
-    if not p.is_file():
-        raise SpecError(f"{source}: field robot.file: robot file {p} not found")
-    if p.suffix.lower() not in ROBOT_SUFFIXES:
-        raise SpecError(f"{source}: field robot.file: {spec.robot.file!r} is neither URDF "
-                        f"nor MJCF (suffix one of {', '.join(ROBOT_SUFFIXES)})")
+def _find_robot(spec: Spec, source: Path | str, here: Path | None) -> Path:
+    ref = spec.robot.file
+    if Path(ref).suffix.lower() not in ROBOT_SUFFIXES:
+        raise SpecError(f"{source}: field robot.file: {ref!r} is neither URDF nor MJCF "
+                        f"(suffix one of {', '.join(ROBOT_SUFFIXES)})")
+    found = find_on_search_path(ref, here)
+    if found is None:
+        where = ", ".join(str(f) for f in spec_search_path(here))
+        raise SpecError(f"{source}: field robot.file: robot file {ref!r} not found in {where}")
+    return found
 
 
-def load_spec(spec: str | Path) -> Spec:
-    """Load, merge (``extends``) and validate a spec by path or name."""
-    path = resolve_spec_path(spec)
-    return build_spec(path.stem, raw_spec(path), path)
+def load_spec(spec: str | Path, here: Path | None = None) -> Spec:
+    """Load, merge (``extends``) and validate a spec by path or name (see
+    :func:`resolve_spec_path`)."""
+    path = resolve_spec_path(spec, here)
+    return build_spec(path.stem, raw_spec(path), path, path.resolve().parent)
 
 
 def with_overrides(spec: Spec, overrides: dict[str, Any], name: str | None = None) -> Spec:
@@ -325,6 +348,6 @@ def with_overrides(spec: Spec, overrides: dict[str, Any], name: str | None = Non
         if parts[-1] not in node:
             raise SpecError(f"--set {key}: unknown key {parts[-1]!r}")
         node[parts[-1]] = value
-    return build_spec(name or spec.name, data, f"--set on {spec.name}")
+    return build_spec(name or spec.name, data, f"--set on {spec.name}", spec._here)
 
 

@@ -15,8 +15,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pipeline.paths import PROJECT_ROOT
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.spec import PROJECT_ROOT, Spec, load_spec
+from pipeline.spec import Spec, load_spec
 
 SEEDS = (0, 1, 2, 3, 4)
 

@@ -18,9 +18,10 @@ from pathlib import Path
 
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
+from pipeline.paths import PROJECT_ROOT
 from pipeline.reports.render import render_all
 from pipeline.sim.run import run_spec
-from pipeline.spec import PROJECT_ROOT, load_spec
+from pipeline.spec import load_spec
 
 SHORT = {"t_nominal": "short_nominal", "t_dt010": "short_omega_ripple_dt010",
          "t_imex": "short_omega_ripple_imex"}

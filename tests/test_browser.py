@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from report_fixtures import built
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = [pytest.mark.browser,

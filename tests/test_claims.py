@@ -10,10 +10,11 @@ import pytest
 import yaml
 from report_fixtures import built, run_cli
 
+from pipeline.claims.evaluate import compare_values, dig
+from pipeline.claims.register import OPERATORS, load_claims
 from pipeline.errors import SpecError
-from pipeline.reports.claims import compare_values, dig
-from pipeline.reports.claims_file import OPERATORS, load_claims
-from pipeline.spec import SPECS_DIR
+from pipeline.logs import read_meta
+from pipeline.paths import SHIPPED_SPECS
 
 
 def claims_file(tmp_path: Path, claims: list[dict], runs: dict | None = None) -> Path:
@@ -115,7 +116,10 @@ def test_provenance_and_threshold_references(tmp_path):
     r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
     assert r.returncode == 0, r.stderr
     prov = json.loads((tmp_path / "out" / "claims.json").read_text())["claims"][0]["provenance"]
-    assert prov == [{"code_version": prov[0]["code_version"], "log": str(
+    meta = read_meta(b.logs / "t_nominal" / "run.parquet")
+    record = json.loads((tmp_path / "out" / "t_nominal" / "analysis.json").read_text())
+    assert prov == [{"sim_version": meta.sim_version,
+                     "analysis_version": record["analysis_version"], "log": str(
         b.logs / "t_nominal" / "run.parquet"), "source": "nominal", "spec": "t_nominal",
         "spec_hash": prov[0]["spec_hash"], "versions": prov[0]["versions"]}]
     assert "numpy" in prov[0]["versions"] and "pinocchio" in prov[0]["versions"]
@@ -162,7 +166,7 @@ ISSUE_THRESHOLDS = [
 
 @pytest.mark.parametrize("name", ["claims.yaml", "claims_ci.yaml"])
 def test_the_registers_state_the_issue_claims_with_their_thresholds(name):
-    cf = load_claims(SPECS_DIR / name)
+    cf = load_claims(SHIPPED_SPECS / name)
     by_id = {c.id: c for c in cf.claims}
     for cid, metric, op, threshold in ISSUE_THRESHOLDS:
         assert by_id[cid].expect == "hold"
@@ -186,7 +190,7 @@ NOTE_TOLERANCES = [
 
 @pytest.mark.parametrize("name", ["claims.yaml", "claims_ci.yaml"])
 def test_the_registers_state_the_seed_note_rows_with_the_issue_tolerances(name):
-    cf = load_claims(SPECS_DIR / name)
+    cf = load_claims(SHIPPED_SPECS / name)
     by_id = {c.id: c for c in cf.claims}
     for cid, metric, note, tol in NOTE_TOLERANCES:
         assert any(k.metric == metric and k.op == "close" and k.threshold_metric == note
@@ -198,7 +202,8 @@ def test_the_registers_state_the_seed_note_rows_with_the_issue_tolerances(name):
 
 
 def test_ci_register_is_the_same_claims_on_short_missions():
-    full, ci = load_claims(SPECS_DIR / "claims.yaml"), load_claims(SPECS_DIR / "claims_ci.yaml")
+    full = load_claims(SHIPPED_SPECS / "claims.yaml")
+    ci = load_claims(SHIPPED_SPECS / "claims_ci.yaml")
     assert full.claims == ci.claims
     assert {n: r.spec for n, r in ci.runs.items()} == {
         "nominal": "short_nominal", "dt010": "short_omega_ripple_dt010",
@@ -265,10 +270,10 @@ def test_a_note_metric_without_a_note_file_is_refused(tmp_path):
 
 
 def test_the_shipped_note_publishes_the_issue_values():
-    """The seed note's numbers as issue 11 lists them, read from specs/seed_note.yaml."""
-    from pipeline.reports.seed_note import load_note
+    """The seed note's numbers as issue 11 lists them, read from pipeline/specs/seed_note.yaml."""
+    from pipeline.claims.seed_note import load_note
 
-    note = load_note(SPECS_DIR / "seed_note.yaml")
+    note = load_note(SHIPPED_SPECS / "seed_note.yaml")
     expected = {("dominant_lag1", "nominal"): -0.92, ("dominant_lag1", "dt010"): 1.0,
                 ("dt_mu_max", "nominal"): 3.84, ("dt_mu_max", "dt010"): 1.28,
                 ("eig_dominant", "nominal"): -2.81, ("eig_dominant", "dt010"): 1.0,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 PKG = PROJECT_ROOT / "pipeline"
 

@@ -1,12 +1,12 @@
 """The equation ↔ code checks, one pytest id per check: the same suite the cross-check report
-renders (``pipeline.reports.equation_checks``), so a broken equation fails its own test id."""
+renders (``pipeline.verify.suite``), so a broken equation fails its own test id."""
 
 from __future__ import annotations
 
 import pytest
 
-from pipeline.reports.checks_base import run_check
-from pipeline.reports.equation_checks import all_checks, check_id
+from pipeline.verify.checks_base import run_check
+from pipeline.verify.suite import all_checks, check_id
 
 CHECKS = list(all_checks())
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import ast
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 PKG = PROJECT_ROOT / "pipeline"
 
@@ -62,3 +62,53 @@ def test_no_import_cycles():
 def test_the_cycle_finder_finds_a_cycle():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+# The layers, lowest first: a unit may import (anywhere in its files, lazy imports included)
+# only units of its own layer or below. Data flows up: sim writes logs, analysis reads them,
+# claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
+LAYERS = (
+    ("errors", "paths", "yamlfile", "provenance.keys", "provenance"),
+    ("spec", "budget"),
+    ("logs",),
+    ("sim",),
+    ("analysis",),
+    ("provenance.validity", "verify", "sweep"),
+    ("orchestrate",),
+    ("claims",),
+    ("reports",),
+    ("bench", "cli", "__main__"),
+)
+RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
+
+
+def _unit(module: str) -> str:
+    parts = module.split(".")[1:] or ["__init__"]
+    two = ".".join(parts[:2])
+    return two if two in RANK else parts[0]
+
+
+def test_imports_go_down_the_layers():
+    upward = []
+    for path in PKG.rglob("*.py"):
+        if "__pycache__" in path.parts or (path.name == "__init__.py" and path.parent == PKG):
+            continue
+        me = _unit(_module(path))
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+            for name in names:
+                if name.startswith("pipeline."):
+                    other = _unit(name)
+                    if RANK[other] > RANK[me]:
+                        upward.append(f"{_module(path)} imports {name}")
+    assert not upward, "; ".join(sorted(upward))
+
+
+def test_every_unit_has_a_layer():
+    units = {_unit(_module(p)) for p in PKG.rglob("*.py")
+             if "__pycache__" not in p.parts and p != PKG / "__init__.py"}
+    assert units <= set(RANK), sorted(units - set(RANK))

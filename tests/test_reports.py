@@ -16,12 +16,13 @@ import pytest
 from conftest import footer_metadata
 from report_fixtures import analyse_pair, built, write_spec
 
-from pipeline.reports import baselines, sources
-from pipeline.reports.checks_base import Check, CheckResult, Outcome, run_check
-from pipeline.reports.cross_check import _pair, build_cross_check
+from pipeline.claims import baselines
 from pipeline.reports.render import render_all
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec
+from pipeline.verify import sources
+from pipeline.verify.checks_base import Check, CheckResult, Outcome, run_check
+from pipeline.verify.cross_check import _pair, build_cross_check
 
 # -- equations and code sites -------------------------------------------------------------
 

@@ -27,14 +27,15 @@ from pipeline.analysis import theory
 from pipeline.analysis.stages import analyze_log
 from pipeline.errors import SpecError
 from pipeline.logs import num_rows, read_columns, read_meta
+from pipeline.paths import SHIPPED_SPECS
 from pipeline.sim.base_controller import block_gains
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.robot_file import load_robot_model
 from pipeline.sim.run import run_spec
-from pipeline.spec import SPECS_DIR, load_spec, with_overrides
+from pipeline.spec import load_spec, with_overrides
 
 I_ZZ_BUS = 0.01 + 0.005625  # kg·m², the MJCF's box_base izz + base_link izz, by hand
-SEED_FILE = SPECS_DIR / "robots" / "seed_ur3_box.xml"
+SEED_FILE = SHIPPED_SPECS / "robots" / "seed_ur3_box.xml"
 H = 1e-6
 
 
@@ -289,8 +290,8 @@ def test_a_complete_run_never_reaches_the_divergence_criterion(short_nominal_log
 # -- the note's table and the reports ------------------------------------------------------------
 
 def test_note_table_puts_the_note_beside_our_values():
+    from pipeline.claims.seed_note import NOTE_FILE, load_note, note_table
     from pipeline.reports.mechanism import note_rows
-    from pipeline.reports.seed_note import NOTE_FILE, load_note, note_table
 
     note = load_note(NOTE_FILE)
     rec = {"spec_name": "nominal", "dominant": {"lag1": -0.999, "sigma": 0.7641},

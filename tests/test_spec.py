@@ -12,9 +12,8 @@ from conftest import run_cli
 
 from pipeline.cli import main
 from pipeline.errors import SpecError
+from pipeline.paths import PROJECT_ROOT, SHIPPED_SPECS
 from pipeline.spec import (
-    PROJECT_ROOT,
-    SPECS_DIR,
     Spec,
     canonical_hash,
     load_spec,
@@ -45,8 +44,8 @@ BAD_SPECS: dict[str, tuple[dict[str, str], str, tuple[str, ...]]] = {
                      "s.yaml", ("robot.q_bar",)),
     "missing_robot": ({"s.yaml": "extends: nominal\nrobot: {file: robots/nope.urdf}\n"},
                       "s.yaml", ("robot.file", "nope.urdf")),
-    "robot_escapes": ({"s.yaml": "extends: nominal\nrobot: {file: ../pyproject.toml}\n"},
-                      "s.yaml", ("robot.file", "escapes")),
+    "robot_unreadable": ({"s.yaml": "extends: nominal\nrobot: {file: r.urdf}\n",
+                          "r.urdf": "<robot name='x'><link"}, "s.yaml", ("r.urdf",)),
     "robot_not_urdf_or_mjcf": ({"s.yaml": "extends: nominal\nrobot: {file: nominal.yaml}\n"},
                                "s.yaml", ("robot.file", "neither URDF nor MJCF")),
     "old_urdf_key": ({"s.yaml": "extends: nominal\nrobot: {urdf: robots/x.urdf}\n"},
@@ -57,7 +56,7 @@ BAD_SPECS: dict[str, tuple[dict[str, str], str, tuple[str, ...]]] = {
     "extends_cycle": ({"a.yaml": "extends: b\n", "b.yaml": "extends: a\n"},
                       "a.yaml", ("cycle",)),
     "self_cycle": ({"a.yaml": "extends: a\n"}, "a.yaml", ("cycle",)),
-    "extends_escapes": ({"s.yaml": "extends: ../x\n"}, "s.yaml", ("../x", "escapes")),
+    "extends_escapes": ({"s.yaml": "extends: ../x\n"}, "s.yaml", ("../x", "not a bare name")),
     "missing_parent": ({"s.yaml": "extends: no_such_parent\n"}, "s.yaml", ("no_such_parent",)),
     "missing_file": ({}, "absent.yaml", ("absent.yaml", "not found")),
     "missing_name": ({}, "NAME:no_such_spec", ("no_such_spec",)),
@@ -221,7 +220,7 @@ def test_hash_changes_with_content(key, value):
 
 def test_hash_is_distinct_across_shipped_specs():
     # Every mission spec shipped loads and is distinct (claims registers share the folder).
-    names = [p.stem for p in SPECS_DIR.glob("*.yaml")
+    names = [p.stem for p in SHIPPED_SPECS.glob("*.yaml")
              if not p.stem.startswith("claims") and p.stem != "seed_note"]
     assert {"nominal", "omega_ripple_dt010", "omega_ripple_imex", *SHORT_SPECS} <= set(names)
     hashes = {load_spec(n).spec_hash for n in names}
@@ -302,6 +301,25 @@ def test_spec_is_immutable():
         s.mission.dt = 0.5  # type: ignore[misc]
 
 
-def test_specs_dir_is_the_project_one():
-    assert SPECS_DIR == PROJECT_ROOT / "specs"
-    assert (SPECS_DIR / "nominal.yaml").is_file()
+def test_shipped_specs_live_in_the_package():
+    assert SHIPPED_SPECS == PROJECT_ROOT / "pipeline" / "specs"
+    assert load_spec("nominal").robot_path == SHIPPED_SPECS / "robots" / "seed_ur3_box.xml"
+
+
+def test_spec_files_resolve_beside_the_spec_then_on_the_search_path(tmp_path, monkeypatch):
+    """A user's folder outside the package: its own robot beside its spec wins over the
+    shipped one of the same name; BREVE_SPEC_PATH makes its specs usable by name; an
+    ``extends`` of a shipped spec still finds the shipped spec."""
+    user = tmp_path / "my_specs"
+    (user / "robots").mkdir(parents=True)
+    robot = user / "robots" / "seed_ur3_box.xml"
+    robot.write_bytes((SHIPPED_SPECS / "robots" / "seed_ur3_box.xml").read_bytes())
+    (user / "mine.yaml").write_text("extends: nominal\nmission: {duration: 1.0}\n")
+    spec = load_spec(user / "mine.yaml")
+    assert spec.robot_path == robot.resolve()
+    robot.unlink()  # now only the shipped robot of that name is left
+    assert load_spec(user / "mine.yaml").robot_path == SHIPPED_SPECS / "robots" / robot.name
+    with pytest.raises(SpecError, match="spec 'mine' not found"):
+        load_spec("mine")
+    monkeypatch.setenv("BREVE_SPEC_PATH", str(user))
+    assert load_spec("mine").mission.duration == 1.0

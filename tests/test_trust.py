@@ -18,9 +18,9 @@ import pytest
 from conftest import footer_metadata, run_cli
 
 from pipeline.analysis.stages import analyze_log
+from pipeline.claims.baselines import compare_logs
 from pipeline.errors import LogDamaged
 from pipeline.logs import MAY_BE_INFINITE, VECTOR_COLUMNS, read_meta, verify_log
-from pipeline.reports.baselines import compare_logs
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 

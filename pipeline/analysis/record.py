@@ -22,16 +22,17 @@ import pyarrow.parquet as pq
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, atomic_write_text
 
-SCHEMA = "breve-analysis/1"
+SCHEMA = "breve-analysis/2"  # /2: sim_version and analysis_version (was code_version)
 RECORD_NAME = "analysis.json"
 TABLE_NAME = "directions.parquet"
 # The stages every record of a complete log holds, and those of a diverged log's record.
-STAGES = ("spec_name", "log", "spec_hash", "code_version", "integrator", "dt", "n_steps",
-          "window", "provenance", "directions", "dominant", "theory", "alignment",
-          "velocity_jump", "bus_rate", "metrics", "robot", "bus_mode", "mu_max_log")
-DIVERGED_STAGES = ("spec_name", "log", "spec_hash", "code_version", "integrator", "dt",
-                   "n_steps", "status", "diverged_step", "provenance", "divergence", "theory",
-                   "robot")
+STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version", "analysis_version",
+          "integrator", "dt", "n_steps", "window", "provenance", "directions", "dominant",
+          "theory", "alignment", "velocity_jump", "bus_rate", "metrics", "robot", "bus_mode",
+          "mu_max_log")
+DIVERGED_STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version",
+                   "analysis_version", "integrator", "dt", "n_steps", "status", "diverged_step",
+                   "provenance", "divergence", "theory", "robot")
 
 
 def _table_bytes(record: dict) -> bytes:

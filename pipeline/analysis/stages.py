@@ -25,6 +25,7 @@ from pipeline.logs import (
     require_columns,
     verify_log,
 )
+from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.robot import GiordanoRobot
@@ -142,8 +143,10 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     data_dir = signals.dominant_step_direction(cols["v"])
     jumps = signals.velocity_jumps(cols["v"])
     return {
-        "spec_name": spec.name, "log": str(path), "spec_hash": meta.spec_hash,
-        "code_version": meta.code_version, "integrator": spec.controller.integrator,
+        "spec_name": spec.name, "log": str(path), "log_sha256": file_digest(path),
+        "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
+        "analysis_version": analysis_version(),
+        "integrator": spec.controller.integrator,
         "dt": dt, "n_steps": n,
         "window": {"start_step": win.start, "stop_step": win.stop, "rule": win.rule},
         "provenance": prov,
@@ -208,8 +211,10 @@ def divergence_record(path, meta: LogMeta, spec: Spec) -> dict:
     sim = rec["eig_dominant"]["real"]
     note = rec["note_order"]["eig_dominant"]["real"]
     return {
-        "spec_name": spec.name, "log": str(path), "spec_hash": meta.spec_hash,
-        "code_version": meta.code_version, "integrator": spec.controller.integrator,
+        "spec_name": spec.name, "log": str(path), "log_sha256": file_digest(path),
+        "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
+        "analysis_version": analysis_version(),
+        "integrator": spec.controller.integrator,
         "dt": spec.mission.dt, "n_steps": n, "status": "diverged",
         "diverged_step": meta.failed_step, "error": meta.error,
         "note": f"a diverged log, read up to its divergence step {meta.failed_step}: only "

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
+from pipeline.claims.seed_note import NOTE_FILE, fmt, load_note, note_table
 from pipeline.reports.figures import RunData
-from pipeline.reports.seed_note import NOTE_FILE, fmt, load_note, note_table
 
 V_BREVE_LABELS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x (linear)", "ν_e,y (linear)",
                   "ν_e,z (linear)", "ω_e,x", "ω_e,y", "ω_e,z (camera roll about the boresight)")

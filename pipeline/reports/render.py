@@ -4,6 +4,9 @@ Reads each ``<out>/<name>/analysis.json`` (and the log it names), then writes th
 (``figures/*.png``), the equation cross-check (``GNC/cross_check.{md,html}``), one mechanism
 report per analysed pair (``<name>/mechanism.{md,html}``) and ``index.html`` linking them all,
 with the claims register, baselines, benchmark and sweep pages when they exist.
+
+Rendering is skipped when the reports are current (:func:`pipeline.provenance.validity.
+current_report`: the same inputs, renderer and templates as last time; ``.report-key``).
 """
 
 from __future__ import annotations
@@ -14,23 +17,22 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
+from pipeline.claims.register import CLAIMS_SCHEMA
 from pipeline.errors import LogError
-from pipeline.logs import read_meta
+from pipeline.logs import atomic_write_text, read_meta
+from pipeline.provenance.keys import report_version
+from pipeline.provenance.validity import current_report, report_key
 from pipeline.reports import figures as fg
-from pipeline.reports.claims_file import CLAIMS_SCHEMA
-from pipeline.reports.cross_check import write_cross_check
 from pipeline.reports.mechanism import mechanism_context
 from pipeline.reports.templating import render
-from pipeline.spec import PROJECT_ROOT
-from pipeline.version import code_version
+from pipeline.verify.cross_check import CrossCheck, build_cross_check, write_cross_check_json
+
+KEY_FILE = ".report-key"  # the key of the last complete rendering
 
 
 def _log_of(record: dict) -> Path | None:
     p = Path(record.get("log", ""))
-    for cand in (p, PROJECT_ROOT / p):
-        if cand.is_file():
-            return cand
-    return None
+    return p if p.is_file() else None
 
 
 def load_runs(out: Path) -> list[fg.RunData]:
@@ -158,8 +160,18 @@ def _remove_stale(out: Path, keep: set[Path]) -> None:
         p.unlink(missing_ok=True)
 
 
-def render_all(out: Path) -> list[Path]:
-    """Render every report into ``out``; returns the files written (index first).
+def render_cross_check(out: Path, cc: CrossCheck) -> list[Path]:
+    """``out/GNC/cross_check.{md,html,json}``."""
+    folder = Path(out) / "GNC"
+    ctx = {"cc": cc, "summary": cc.summary()}
+    return [render("cross_check.md.j2", folder / "cross_check.md", **ctx),
+            render("cross_check.html.j2", folder / "cross_check.html", **ctx),
+            write_cross_check_json(out, cc)]
+
+
+def render_all(out: Path, force: bool = False) -> list[Path]:
+    """Render every report into ``out``; returns the files written (index first), none when
+    the reports are current and ``force`` is false.
 
     Refuses (exit 2) a folder that does not exist or holds nothing to report, and a damaged
     analysis.json or claims.json; removes the reports and figures of runs that are gone."""
@@ -167,6 +179,10 @@ def render_all(out: Path) -> list[Path]:
     if not out.is_dir():
         raise LogError(f"{out}: report folder not found (run `make all` or `python -m "
                        f"pipeline analyze LOG --out {out}` first)")
+    if not force and current_report(out, out / KEY_FILE):
+        print(f"report: up to date (same inputs and renderer) -> {out / 'index.html'}")
+        return []
+    key = report_key(out)  # before rendering: the inputs this rendering reads
     runs = load_runs(out)
     claims = read_claims_json(out / "claims.json")
     sweep_tables = list(out.glob("sweeps/*/sweep.parquet"))
@@ -175,8 +191,8 @@ def render_all(out: Path) -> list[Path]:
                        f"sweeps/*/sweep.parquet")
     figs, skipped = make_figures(out, runs)
     fig_files = {f.file for f in figs}
-    cc = write_cross_check(out)
-    written = [out / "GNC" / "cross_check.md", out / "GNC" / "cross_check.html"]
+    cc = build_cross_check()
+    written = render_cross_check(out, cc)
     mechanisms = []
     for r in runs:
         if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
@@ -193,9 +209,10 @@ def render_all(out: Path) -> list[Path]:
     sweeps = sorted(p.relative_to(out).as_posix() for p in out.glob("sweeps/*/*.md"))
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
-                   pages=pages, sweeps=sweeps, code_version=code_version())
+                   pages=pages, sweeps=sweeps, code_version=report_version())
     for s in skipped:
         print(f"note: {s}", file=sys.stderr)
+    atomic_write_text(out / KEY_FILE, key)  # last: a rendering cut short is redone
     print(f"report: {len(mechanisms)} mechanism reports, {len(figs)} figures, cross-check "
           f"{cc.summary()['pass']}/{cc.summary()['rows']} PASS -> {index}")
     return [index, *written]

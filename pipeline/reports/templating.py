@@ -72,7 +72,7 @@ def href(path: str) -> str:
 
 def rel(path) -> str:
     """A path relative to the project root when it lies inside it."""
-    from pipeline.reports.runs import display_path
+    from pipeline.paths import display_path
 
     return display_path(path)
 

@@ -7,7 +7,8 @@ Numba invalidates a cached kernel only when the file that defines it changes, no
 kernel it calls from another file does: an edit of ``breve_controller.py`` would leave the
 cached step kernel running the old controller. So the cache lives in a folder named after a
 hash of every source file of this package (:func:`source_stamp`): any edit here starts a fresh
-cache. ``NUMBA_CACHE_DIR``, if set, is used as it is.
+cache. ``NUMBA_CACHE_DIR``, if set, is used as it is; an installed package caches in the
+per-user folder of :func:`pipeline.paths.user_cache_dir`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from pathlib import Path
 
 from numba import njit
 from numba.core import config
+
+from pipeline.paths import source_checkout, user_cache_dir
 
 SIM_DIR = Path(__file__).resolve().parent
 
@@ -31,8 +34,13 @@ def source_stamp(directory: Path = SIM_DIR) -> str:
 
 
 def kernel_cache_dir(directory: Path = SIM_DIR) -> Path:
-    """Where this source's compiled kernels are cached (``make clean`` removes old ones)."""
-    return directory / "__pycache__" / f"numba-{source_stamp(directory)}"
+    """Where this source's compiled kernels are cached: beside the sources in a checkout
+    (``make clean`` removes old ones), in the per-user cache folder of an installed package
+    (its site-packages may be read-only and is shared by users)."""
+    stamp = f"numba-{source_stamp(directory)}"
+    if source_checkout():
+        return directory / "__pycache__" / stamp
+    return user_cache_dir() / stamp
 
 
 if not os.environ.get("NUMBA_CACHE_DIR"):

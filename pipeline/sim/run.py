@@ -11,13 +11,13 @@ from pipeline.logs import (
     FINAL_KEYS,
     LogMeta,
     LogWriter,
-    library_versions,
     log_metadata,
     static_metadata,
 )
+from pipeline.paths import display_path
+from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions, sim_version
 from pipeline.sim.mission import Mission
-from pipeline.spec import SPECS_DIR, Spec, file_hash
-from pipeline.version import code_version
+from pipeline.spec import Spec
 
 
 @dataclass(frozen=True)
@@ -44,10 +44,9 @@ def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,
     mission = Mission(spec)
     meta = LogMeta(
         spec=spec.model_dump(mode="json"), spec_hash=spec.spec_hash,
-        code_version=code_version(),
-        robot_file=str(spec.robot_path.relative_to(SPECS_DIR.parent)),
-        robot_hash=file_hash(spec.robot_path), status="", failed_step=None, error="",
-        versions=library_versions(),
+        sim_version=sim_version(), robot_file=display_path(spec.robot_path),
+        robot_hash=file_digest(spec.robot_path), status="", failed_step=None, error="",
+        versions=library_versions(SIM_LIBRARIES),
     )
     path = log_path(spec, Path(out_dir))
     # Row group by row group: a long run's memory stays at one group; the status and the

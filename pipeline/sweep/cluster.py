@@ -20,7 +20,7 @@ from pathlib import Path
 import dask
 
 from pipeline.errors import SpecError
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 CONNECT_TIMEOUT = 5.0  # s, for an existing scheduler
 ALLOWED_FAILURES = 3  # worker deaths a point survives before it is a failed row

@@ -16,12 +16,12 @@ from tqdm import tqdm
 
 from pipeline.budget import Budget, check_mission, check_sweep_size, check_sweep_time
 from pipeline.errors import OutputError, RunFailed
+from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.spec import Spec, load_spec
 from pipeline.sweep.cluster import open_client
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
 from pipeline.sweep.point import figures, run_point
 from pipeline.sweep.results import TABLE_NAME, make_table, summary_text, write_sweep_table
-from pipeline.version import code_version
 
 POLL = 0.2  # s between looks at the futures
 PROCESSING_EVERY = 1.0  # s between asks to the scheduler for the running count
@@ -117,11 +117,12 @@ def execute(sweep: Sweep, client, progress: bool = False) -> list[dict]:
 
 def run_sweep(sweep: Sweep, client, progress: bool = False):
     """Run the sweep on ``client`` and write its table; returns (table, path)."""
-    version = code_version()  # the driver's; each worker checks its own against the logs
     records = execute(sweep, client, progress)
     df = make_table(sweep.keys, [p.overrides for p in sweep.points], records)
     meta = {"pipeline.sweep": sweep.name, "pipeline.spec": sweep.base.name,
-            "pipeline.base_spec_hash": sweep.base.spec_hash, "pipeline.code_version": version,
+            "pipeline.base_spec_hash": sweep.base.spec_hash,
+            # the driver's keys; each worker checked its own logs and analyses against its own
+            "pipeline.sim_version": sim_version(), "pipeline.analysis_version": analysis_version(),
             "pipeline.keys": ",".join(sweep.keys), "pipeline.log_dir": str(sweep.log_dir)}
     return df, write_sweep_table(df, sweep.table_path, meta)
 

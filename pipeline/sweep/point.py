@@ -3,10 +3,11 @@
 Runs on a worker. The log goes to ``ROOT/<point>/run.parquet`` and the analysis beside it
 (``analysis.json``, ``directions.parquet``), all written atomically.
 
-Cache: a log whose metadata carries the point's spec hash and the current code version is
-reused, whether ``complete``, ``failed`` or ``diverged`` (the simulation is deterministic: the
-same spec on the same code fails or diverges again at the same step). An ``analysis.json``
-is reused when it is not older than the log and names the same spec hash and code version.
+Cache: a log that :func:`pipeline.provenance.validity.current_log` accepts (this spec, robot
+and simulator) is reused, whether ``complete``, ``failed`` or ``diverged`` (the simulation is
+deterministic: the same spec on the same code fails or diverges again at the same step). An
+``analysis.json`` is reused when ``current_analysis`` accepts it (made from that log by this
+analysis code).
 
 Concurrency: the simulate-and-analyse part runs under an exclusive ``flock`` on
 ``ROOT/<point>/.lock``, so two sweeps sharing a point (or a rescheduled task meeting its
@@ -27,11 +28,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-from pipeline.analysis.record import try_read_analysis
-from pipeline.errors import LogError, PipelineError
-from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.errors import PipelineError
+from pipeline.logs import num_rows, read_meta
+from pipeline.provenance.validity import current_analysis, current_log
 from pipeline.spec import Spec
-from pipeline.version import code_version
 
 LOCK_NAME = ".lock"
 LOG_NAME = "run.parquet"
@@ -58,33 +58,6 @@ FIGURES: dict[str, tuple[str, ...]] = {
     "mu_bus": ("robot", "mu_bus"),
     "bus_critical_I_zz": ("bus_mode", "critical_I_zz"),
 }
-
-
-def cached_log(log: Path, spec: Spec) -> LogMeta | None:
-    """The log's metadata if it is a finished run of this spec on this code, else None."""
-    try:
-        meta = read_meta(log)
-    except LogError:
-        return None
-    if (meta.spec_hash != spec.spec_hash or meta.code_version != code_version()
-            or meta.status not in ("complete", "failed", "diverged")):
-        return None
-    return meta
-
-
-def cached_analysis(path: Path, log: Path, meta: LogMeta) -> dict | None:
-    """The analysis record beside the log if it is at least as new and of the same run."""
-    try:
-        if path.stat().st_mtime_ns < log.stat().st_mtime_ns:
-            return None
-    except OSError:
-        return None
-    record = try_read_analysis(path)
-    if record is None:
-        return None
-    if record.get("spec_hash") != meta.spec_hash or record.get("code_version") != meta.code_version:
-        return None
-    return record
 
 
 @contextmanager
@@ -157,19 +130,19 @@ def run_point(spec: Spec, root: str) -> dict:
     ran = analysed = False
     error = ""
     analysis = None
-    meta = cached_log(log, spec)
+    meta = current_log(log, spec)
     if meta is not None and meta.status == "complete":
-        analysis = cached_analysis(analysis_path, log, meta)
+        analysis = current_analysis(analysis_path, log, meta)
     if meta is None or (meta.status == "complete" and analysis is None):
         with point_lock(folder):
             remove_stale_temps(folder)
-            meta = cached_log(log, spec)  # another sweep may have finished it meanwhile
+            meta = current_log(log, spec)  # another sweep may have finished it meanwhile
             if meta is None:
                 run_spec(spec, root, raise_on_failure=False)
                 ran = True
                 meta = read_meta(log)
             if meta.status == "complete":
-                analysis = cached_analysis(analysis_path, log, meta)
+                analysis = current_analysis(analysis_path, log, meta)
                 if analysis is None:
                     try:
                         analysis = analyze_log(log)

@@ -2,15 +2,15 @@
 
 :func:`all_checks` yields every check of the ``checks_*`` modules in a fixed order. The suite
 is used twice: ``tests/test_equations.py`` parametrises pytest with one test id per check, and
-the cross-check report (:mod:`pipeline.reports.cross_check`) renders the same results.
+the cross-check report (:mod:`pipeline.verify.cross_check`) renders the same results.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 
-from pipeline.reports import checks_analysis, checks_loop, checks_model, checks_step
-from pipeline.reports.checks_base import Check, CheckResult, run_check
+from pipeline.verify import checks_analysis, checks_loop, checks_model, checks_step
+from pipeline.verify.checks_base import Check, CheckResult, run_check
 
 MODULES = (checks_model, checks_loop, checks_step, checks_analysis)
 

@@ -1,4 +1,5 @@
-"""``python -m pipeline claims``: run what is missing, evaluate every claim, write CLAIMS.md.
+"""The claims register evaluated: run what is missing, measure every metric, compare, and
+write ``claims.json`` (the reports render it as CLAIMS.md).
 
 Statuses: PASS (a ``hold`` claim holds), FAIL (a ``hold`` claim does not: exit 1), OPEN (an
 ``open`` claim does not hold yet: listed with its measured value and reason, no failure) and
@@ -18,9 +19,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.analysis.signals import lag1_autocorrelation
-from pipeline.errors import SpecError
-from pipeline.logs import atomic_write_text, read_columns
-from pipeline.reports.claims_file import (
+from pipeline.claims.register import (
     CLAIMS_SCHEMA,
     LOG_GROUPS,
     OPERATORS,
@@ -32,10 +31,12 @@ from pipeline.reports.claims_file import (
     note_path,
     split_metric,
 )
-from pipeline.reports.runs import RunRecord, display_path, ensure_analysis, ensure_run
-from pipeline.reports.templating import render
-from pipeline.spec import PROJECT_ROOT, load_spec
-from pipeline.version import code_version
+from pipeline.errors import SpecError
+from pipeline.logs import atomic_write_text, read_columns
+from pipeline.orchestrate import RunRecord, ensure_analysis, ensure_run
+from pipeline.paths import display_path
+from pipeline.provenance.keys import source_version
+from pipeline.spec import load_spec, resolve_spec_path
 
 
 @dataclass
@@ -103,8 +104,7 @@ class Context:
 
     def __init__(self, cf: ClaimsFile, out_dir: Path):
         self.cf, self.out = cf, Path(out_dir)
-        logs = Path(cf.logs)
-        self.logs = logs if logs.is_absolute() else PROJECT_ROOT / logs
+        self.logs = Path(cf.logs)  # relative to the working directory, like --out
         self.here = Path(cf.source).resolve().parent
         self.runs: dict[str, RunRecord] = {}
         self.analyses: dict[str, dict] = {}
@@ -114,10 +114,7 @@ class Context:
         self._note = None
 
     def _spec(self, name: str):
-        ref = self.cf.runs[name].spec
-        if ref.endswith((".yaml", ".yml")) and not Path(ref).is_absolute():
-            ref = str(self.here / ref)
-        return load_spec(ref)
+        return load_spec(self.cf.runs[name].spec, self.here)
 
     def prepare(self) -> None:
         for name in needed_runs(self.cf):
@@ -130,7 +127,7 @@ class Context:
 
     def note(self):
         """The seed note's published values (the claims file's ``note:``), or None."""
-        from pipeline.reports.seed_note import load_note
+        from pipeline.claims.seed_note import load_note
 
         if self.cf.note is None:
             return None
@@ -140,28 +137,27 @@ class Context:
 
     def cross_check(self) -> dict:
         if self._cross is None:
-            from pipeline.reports.cross_check import write_cross_check
+            from pipeline.verify.cross_check import build_cross_check, write_cross_check_json
 
             print("cross-checking equations against code", file=sys.stderr)
-            cc = write_cross_check(self.out)
-            self._cross = {**cc.summary(), "code_version": cc.code_version}
+            cc = build_cross_check()
+            write_cross_check_json(self.out, cc)
+            self._cross = {**cc.summary(), "source_version": cc.source_version}
         return self._cross
 
     def baselines(self) -> dict:
         if self._baselines is None:
-            from pipeline.reports.baselines import ensure_report
+            from pipeline.claims.baselines import ensure_report
 
             self._baselines = ensure_report(self.out)
         return self._baselines
 
     def sweep(self, alias: str) -> tuple[dict, dict]:
         if alias not in self._sweeps:
-            from pipeline.reports.sweeps import ensure_sweep
+            from pipeline.orchestrate import ensure_sweep
 
             ref = self.cf.sweeps[alias]
-            spec = ref.spec
-            if spec.endswith((".yaml", ".yml")) and not Path(spec).is_absolute():
-                spec = str(self.here / spec)
+            spec = str(resolve_spec_path(ref.spec, self.here))
             self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
                                                self.out / "sweeps", ref.workers, ref.key,
                                                ref.lag, ref.predicted, ref.unstable)
@@ -173,7 +169,7 @@ class Context:
         if source == "note":
             key, _, column = path.partition(".")
             note = self.note()
-            return note.value(key, column), {"source": source, "code_version": "—",
+            return note.value(key, column), {"source": source, "version": "—",
                                              "file": display_path(note.source)}
         if source == "sweep":
             alias, _, key = path.partition(".")
@@ -181,17 +177,19 @@ class Context:
             return dig(bracket, key, f"the stability bracket of sweep {alias}"), prov
         if source == "cross_check":
             cc = self.cross_check()
-            prov = {"source": source, "code_version": cc["code_version"],
-                    "file": display_path(self.out / "GNC" / "cross_check.md")}
+            prov = {"source": source, "version": cc["source_version"],
+                    "file": display_path(self.out / "GNC" / "cross_check.json")}
             return dig(cc, path, "the cross-check summary"), prov
         if source == "baselines":
             b = self.baselines()
-            prov = {"source": source, "code_version": b["code_version"],
+            prov = {"source": source, "version": b["sim_version"],
                     "file": display_path(self.out / "baselines.json")}
             return dig(b, path, "baselines.json"), prov
         run, record = self.runs[source], self.analyses[source]
         prov = {"source": source, "spec": run.spec.name, "spec_hash": run.meta.spec_hash,
-                "code_version": run.meta.code_version, "log": display_path(run.path),
+                "sim_version": run.meta.sim_version,
+                "analysis_version": record.get("analysis_version", ""),
+                "log": display_path(run.path),
                 "versions": ", ".join(f"{k} {v}" for k, v in
                                       sorted((run.meta.versions or {}).items()))}
         head, _, rest = path.partition(".")
@@ -251,7 +249,7 @@ def _jsonable(x: Any) -> Any:
 
 def seed_table(ctx: Context) -> list:
     """The note's evidence table beside the claims' runs of its columns (by run name)."""
-    from pipeline.reports.seed_note import COLUMNS, note_table
+    from pipeline.claims.seed_note import COLUMNS, note_table
 
     note = ctx.note()
     if note is None:
@@ -259,19 +257,30 @@ def seed_table(ctx: Context) -> list:
     return note_table(note, {c: ctx.analyses[c] for c in COLUMNS if c in ctx.analyses})
 
 
-def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
-                 note_rows: list | None = None) -> Path:
-    from pipeline.reports.seed_note import fmt
+@dataclass(frozen=True)
+class ClaimsOutcome:
+    """An evaluated register: what the reports render and the CLI reports."""
 
-    ctx = {"results": results, "claims_file": display_path(cf.source),
-           "note_rows": note_rows or [], "fmt": fmt,
-           "code_version": code_version(),
-           "counts": {s: sum(r.status == s for r in results)
-                      for s in ("PASS", "FAIL", "OPEN", "NOW HOLDS")}}
-    md = render("claims.md.j2", Path(out_dir) / "CLAIMS.md", **ctx)
-    render("claims.html.j2", Path(out_dir) / "CLAIMS.html", **ctx)
-    data = {"schema": CLAIMS_SCHEMA, "claims_file": ctx["claims_file"],
-            "code_version": ctx["code_version"],
+    claims_file: ClaimsFile
+    results: list[ClaimEval]
+    note_rows: list
+    source_version: str
+    record: Path  # claims.json
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.results)
+
+    @property
+    def exit_code(self) -> int:
+        """1 if a hold claim fails or an open claim now holds, else 0."""
+        return 1 if self.count("FAIL") or self.count("NOW HOLDS") else 0
+
+
+def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
+                      version: str) -> Path:
+    path = Path(out_dir) / "claims.json"
+    data = {"schema": CLAIMS_SCHEMA, "claims_file": display_path(cf.source),
+            "source_version": version,
             "claims": [{"id": r.claim.id, "statement": r.claim.statement,
                         "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,
@@ -280,30 +289,27 @@ def write_claims(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
                                     "threshold": _jsonable(c.threshold), "ok": c.ok}
                                    for c in r.checks],
                         "provenance": r.provenance} for r in results]}
-    atomic_write_text(Path(out_dir) / "claims.json", json.dumps(data, indent=1, default=str))
-    return md
+    atomic_write_text(path, json.dumps(data, indent=1, default=str))
+    return path
 
 
-def claims_command(claims: Path, out: Path) -> int:
-    """Evaluate the register; 0 if every hold claim holds and no open claim does."""
-    cf = load_claims(Path(claims))
+def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
+    """Load the register (a path, or a name on the spec search path), run and analyse what
+    it needs, evaluate every claim and write ``claims.json``."""
+    cf = load_claims(resolve_spec_path(claims))
     ctx = Context(cf, out)
     ctx.prepare()
     results = evaluate(cf, ctx)
-    path = write_claims(results, cf, out, seed_table(ctx))
-    for r in results:
-        detail = "; ".join(f"{c.check.metric} = {_short(c.value)} ({c.symbol} "
-                           f"{_short(c.threshold)})" for c in r.checks)
-        print(f"{r.claim.id:>4} {r.status:<9} {detail}")
-    failing = [r for r in results if r.status == "FAIL"]
-    promote = [r for r in results if r.status == "NOW HOLDS"]
-    for r in failing:
-        print(f"claim {r.claim.id} fails: {r.claim.statement}", file=sys.stderr)
-    for r in promote:
-        print(f"claim {r.claim.id} now holds: promote it to expect: hold ({r.claim.statement})",
-              file=sys.stderr)
-    print(f"-> {display_path(path)}")
-    return 1 if failing or promote else 0
+    version = source_version()
+    path = write_claims_json(results, cf, out, version)
+    return ClaimsOutcome(cf, results, seed_table(ctx), version, path)
+
+
+def summary_lines(outcome: ClaimsOutcome) -> list[str]:
+    """One line per claim: its status and each check's value against its threshold."""
+    return [f"{r.claim.id:>4} {r.status:<9} " + "; ".join(
+        f"{c.check.metric} = {_short(c.value)} ({c.symbol} {_short(c.threshold)})"
+        for c in r.checks) for r in outcome.results]
 
 
 def _short(x: Any) -> str:

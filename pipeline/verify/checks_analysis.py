@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from pipeline.reports.checks_base import Outcome, check, rng
+from pipeline.verify.checks_base import Outcome, check, rng
 
 
 @check("25", "lag-1 autocorrelation vs an explicit loop over the definition; −1 for an "
@@ -68,7 +68,7 @@ def _velocity_jumps() -> Outcome:
 
 
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
-# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+# :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
     _lag1,
     _projection,

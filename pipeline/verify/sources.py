@@ -17,7 +17,7 @@ import tokenize
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 PACKAGE = PROJECT_ROOT / "pipeline"
 EQUATIONS_MD = PROJECT_ROOT / "docs" / "equations.md"

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-from pipeline.reports.checks_base import Outcome, check, fmt, maxdiff, random_state, robot
-from pipeline.reports.checks_base import spec as check_spec
+from pipeline.verify.checks_base import Outcome, check, fmt, maxdiff, random_state, robot
+from pipeline.verify.checks_base import spec as check_spec
 
 
 @check("21", "μ = eig(M̆⁻¹D̆) vs sorted eigenvalues of numpy.linalg.solve(M̆, D̆)",
@@ -157,7 +157,7 @@ def _mission_step() -> Outcome:
 
 
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
-# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+# :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
     _damping_rates,
     _discrete_map,

@@ -9,7 +9,7 @@ import inspect
 import numpy as np
 import pinocchio as pin
 
-from pipeline.reports.checks_base import (
+from pipeline.verify.checks_base import (
     Outcome,
     check,
     code,
@@ -298,7 +298,7 @@ def _conditioning_scale() -> Outcome:
 
 
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
-# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+# :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
     _camera_twist,
     _j_bar_v,

@@ -1,4 +1,4 @@
-"""The seed note's published evidence (``specs/seed_note.yaml``) beside our measured values.
+"""The seed note's published evidence (``pipeline/specs/seed_note.yaml``) beside ours.
 
 The note's numbers are data, read and validated here; each row pairs a value the note prints
 with the path of our value in a run's analysis.json. :func:`note_table` lays them side by side
@@ -15,11 +15,11 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.errors import SpecError
-from pipeline.spec import SPECS_DIR
+from pipeline.paths import SHIPPED_SPECS
 from pipeline.yamlfile import read_yaml
 
 COLUMNS = ("nominal", "dt010")
-NOTE_FILE = SPECS_DIR / "seed_note.yaml"  # the mechanism reports' note
+NOTE_FILE = SHIPPED_SPECS / "seed_note.yaml"  # the mechanism reports' note
 
 
 class _Strict(BaseModel):

@@ -3,7 +3,7 @@
 A check names the equation it tests and the code it tests (a qualified name, looked up in the
 code index so its file:line is found by inspection), and returns the inputs it used, the
 largest absolute difference and the tolerance. The ``checks_*`` modules mark their checks with
-:func:`check` and list them in ``CHECKS``; :mod:`pipeline.reports.equation_checks` collects them
+:func:`check` and list them in ``CHECKS``; :mod:`pipeline.verify.suite` collects them
 explicitly, and :func:`run_check` runs one, turning an exception into a FAIL.
 """
 

@@ -1,6 +1,6 @@
-"""Pinned baseline logs: ``python -m pipeline.reports.baselines {check,repin}``.
+"""Pinned baseline logs: ``python -m pipeline.claims.baselines {check,repin}``.
 
-The baselines are the specs ``specs/baseline_*.yaml`` (short missions), pinned as
+The baselines are the specs ``pipeline/specs/baseline_*.yaml`` (short missions), pinned as
 ``logs/baselines/<name>/run.parquet``. ``check`` re-runs each into a temporary folder and
 compares every logged column of the new log with the pinned one, array against array (the
 metadata differs by design: it holds the code version). Bitwise determinism gives
@@ -12,7 +12,6 @@ the pinned logs.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import shutil
 import sys
@@ -25,17 +24,19 @@ import pyarrow.parquet as pq
 
 from pipeline.errors import CheckFailed, PipelineError
 from pipeline.logs import LogError, atomic_write_bytes, atomic_write_text, read_meta
-from pipeline.reports.runs import display_path
+from pipeline.paths import SHIPPED_SPECS, display_path
+from pipeline.provenance.keys import file_digest, sim_version
+from pipeline.provenance.validity import current_baselines
 from pipeline.sim.run import run_spec
-from pipeline.spec import PROJECT_ROOT, SPECS_DIR, load_spec
-from pipeline.version import code_version
+from pipeline.spec import load_spec
 
-PINNED = PROJECT_ROOT / "logs" / "baselines"
-REPORTS = PROJECT_ROOT / "generated_reports"
+# Relative to the working directory, like every output: make runs from the checkout's root.
+PINNED = Path("logs") / "baselines"
+REPORTS = Path("generated_reports")
 
 
 def baseline_names() -> list[str]:
-    return sorted(p.stem for p in SPECS_DIR.glob("baseline_*.yaml"))
+    return sorted(p.stem for p in SHIPPED_SPECS.glob("baseline_*.yaml"))
 
 
 def _arrays(path: Path) -> dict[str, np.ndarray]:
@@ -80,10 +81,6 @@ def compare_logs(pinned: Path, fresh: Path) -> dict:
     return {"max_abs_diff": worst, "worst_column": worst_col, "notes": notes}
 
 
-def _file_hash(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _run_fresh(name: str, tmp: Path) -> tuple[Path, str]:
     spec = load_spec(name)
     out = run_spec(spec, tmp, raise_on_failure=False)
@@ -105,14 +102,14 @@ def check(out_dir: Path = REPORTS, pinned_dir: Path | None = None) -> dict:
             else:
                 meta = read_meta(pinned)
                 entry |= compare_logs(pinned, fresh)
-                entry |= {"pinned_sha256": _file_hash(pinned),
-                          "pinned_code_version": meta.code_version,
+                entry |= {"pinned_sha256": file_digest(pinned),
+                          "pinned_sim_version": meta.sim_version,
                           "pinned_spec_hash": meta.spec_hash}
                 if meta.spec_hash != spec_hash:
                     entry["notes"].append("the spec changed since pinning")
             results[name] = entry
     diffs = [r["max_abs_diff"] for r in results.values()]
-    report = {"code_version": code_version(), "count": len(results),
+    report = {"sim_version": sim_version(), "count": len(results),
               "max_abs_diff": max(diffs) if diffs else float("inf"),
               "all_zero": bool(diffs) and all(d == 0.0 for d in diffs), "baselines": results}
     write_report(report, Path(out_dir))
@@ -124,8 +121,8 @@ def write_report(report: dict, out_dir: Path) -> None:
     atomic_write_text(out_dir / "baselines.json",
                       json.dumps(report, indent=1, default=str, allow_nan=True) + "\n")
     lines = ["# Baselines", "",
-             f"Pinned logs re-run at code version {report['code_version']}; every logged column "
-             "compared array against array. Bitwise determinism gives 0.000e+00.", "",
+             f"Pinned logs re-run by simulator version {report['sim_version']}; every logged "
+             "column compared array against array. Bitwise determinism gives 0.000e+00.", "",
              "| Baseline | max_abs_diff | Worst column | Pinned log | Notes |",
              "|---|---|---|---|---|"]
     for name, r in report["baselines"].items():
@@ -137,17 +134,9 @@ def write_report(report: dict, out_dir: Path) -> None:
 def ensure_report(out_dir: Path, pinned_dir: Path | None = None) -> dict:
     """baselines.json of this code version and these pinned files, re-checked if stale."""
     pinned_dir = PINNED if pinned_dir is None else pinned_dir
-    path = Path(out_dir) / "baselines.json"
-    try:
-        old = json.loads(path.read_text())
-        fresh = (old["code_version"] == code_version()
-                 and sorted(old["baselines"]) == baseline_names()
-                 and all(_file_hash(Path(pinned_dir) / n / "run.parquet")
-                         == old["baselines"][n].get("pinned_sha256") for n in old["baselines"]))
-        if fresh:
-            return old
-    except (OSError, KeyError, json.JSONDecodeError, TypeError):
-        pass
+    old = current_baselines(Path(out_dir) / "baselines.json", baseline_names(), pinned_dir)
+    if old is not None:
+        return old
     print("re-running the baselines", file=sys.stderr)
     return check(out_dir, pinned_dir)
 
@@ -172,8 +161,8 @@ def repin(pinned_dir: Path | None = None) -> list[str]:
                                if cmp["max_abs_diff"] else ""), *cmp["notes"]]
                     if meta.spec_hash != spec_hash:
                         what.append("spec changed")
-                    if meta.code_version != code_version():
-                        what.append(f"code version {meta.code_version} -> {code_version()}")
+                    if meta.sim_version != sim_version():
+                        what.append(f"simulator version {meta.sim_version} -> {sim_version()}")
                 except LogError as exc:
                     what = [f"old pin unreadable ({exc})"]
                 changes.append(f"{name}: " + ", ".join(what))
@@ -186,7 +175,7 @@ def repin(pinned_dir: Path | None = None) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pipeline.reports.baselines",
+    p = argparse.ArgumentParser(prog="python -m pipeline.claims.baselines",
                                 description="check or re-pin the baseline logs")
     p.add_argument("action", choices=("check", "repin"))
     p.add_argument("--out", default=str(REPORTS), help="where baselines.json goes (check)")

@@ -1,4 +1,4 @@
-"""The claims register file (``specs/claims.yaml``): schema, ``extends`` and validation.
+"""The claims register file (``pipeline/specs/claims.yaml``): schema, ``extends`` and validation.
 
     logs: logs                       # where runs are written (relative to the project root)
     runs:                            # run names used in metric paths
@@ -117,7 +117,7 @@ class SweepRef(_Strict):
 
 class ClaimsFile(_Strict):
     logs: str = "logs"
-    note: str | None = None  # the seed note's values (specs/seed_note.yaml), relative to here
+    note: str | None = None  # the seed note's values (seed_note.yaml), relative to here
     runs: dict[str, RunRef] = Field(default_factory=dict)
     sweeps: dict[str, SweepRef] = Field(default_factory=dict)
     claims: list[Claim] = Field(min_length=1)
@@ -225,7 +225,7 @@ def note_path(cf: ClaimsFile, claims_path: Path | str) -> Path:
 
 
 def _check_note_path(cf: ClaimsFile, path: Path, metric: str, mpath: str, where: str) -> None:
-    from pipeline.reports.seed_note import load_note
+    from pipeline.claims.seed_note import load_note
 
     if cf.note is None:
         raise SpecError(f"{where}: metric {metric!r} needs a `note:` file in the claims file")

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from pipeline.reports.checks_base import (
+from pipeline.spec import Limits
+from pipeline.verify.checks_base import (
     Outcome,
     check,
     fmt,
@@ -16,8 +17,7 @@ from pipeline.reports.checks_base import (
     rng,
     robot,
 )
-from pipeline.reports.checks_base import spec as check_spec
-from pipeline.spec import Limits
+from pipeline.verify.checks_base import spec as check_spec
 
 BIG = Limits(omega_b_rate=1e9, omega_b_acc=1e9, nu_e_lin_rate=1e9, nu_e_lin_acc=1e9,
              nu_e_ang_rate=1e9, nu_e_ang_acc=1e9, v_c_rate=1e9, v_c_acc=1e9, v_max=1e9)
@@ -283,7 +283,7 @@ def _coverage() -> Outcome:
 
 
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
-# :func:`pipeline.reports.equation_checks.all_checks` (no registration by import).
+# :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
     _coriolis,
     _damping,

@@ -1,10 +1,11 @@
-"""``GNC/cross_check.md``: each numbered equation, the code that cites it, and its checks.
+"""The equation cross-check: each numbered equation, the code that cites it, and its checks.
 
 Rows come from the headings of docs/equations.md (or, if that file is missing, from the
 equation numbers the code cites). The code column lists every site whose docstring or comment
 cites the equation (file:line from the syntax tree). A check belongs to the row of the
 equation it names, and its code under test must be a site that cites that equation: if the
 site is gone or no longer cites it, the check fails, so the pairing cannot rot silently.
+The result is data (``GNC/cross_check.json``); :mod:`pipeline.reports.render` renders it.
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pipeline.logs import atomic_write_text
-from pipeline.reports.checks_base import CheckResult, defining_qualname
-from pipeline.reports.equation_checks import run_checks
-from pipeline.reports.sources import (
+from pipeline.paths import PROJECT_ROOT
+from pipeline.provenance.keys import source_version
+from pipeline.verify.checks_base import CheckResult, defining_qualname
+from pipeline.verify.sources import (
     EQUATIONS_MD,
     CodeIndex,
     Equation,
@@ -26,9 +28,7 @@ from pipeline.reports.sources import (
     parse_equations,
     scan_package,
 )
-from pipeline.reports.templating import render
-from pipeline.spec import PROJECT_ROOT
-from pipeline.version import code_version
+from pipeline.verify.suite import run_checks
 
 
 @dataclass
@@ -75,7 +75,7 @@ class CrossCheck:
     orphans: list[PairedCheck]  # checks of an equation the document does not have
     source: str  # where the rows came from
     n_sites: int
-    code_version: str
+    source_version: str  # every source of the package (the checks inspect them all)
 
     def summary(self) -> dict[str, int]:
         st = [r.status for r in self.rows]
@@ -144,17 +144,14 @@ def build_cross_check(equations_md: Path = EQUATIONS_MD) -> CrossCheck:
             orphans.append(paired)
         else:
             rows[label].checks.append(paired)
-    return CrossCheck(list(rows.values()), orphans, source, len(index.sites), code_version())
+    return CrossCheck(list(rows.values()), orphans, source, len(index.sites),
+                      source_version())
 
 
-def write_cross_check(out_dir: Path, cc: CrossCheck | None = None) -> CrossCheck:
-    """Render ``out_dir/GNC/cross_check.{md,html,json}``."""
-    cc = cc or build_cross_check()
-    folder = Path(out_dir) / "GNC"
-    ctx = {"cc": cc, "summary": cc.summary()}
-    render("cross_check.md.j2", folder / "cross_check.md", **ctx)
-    render("cross_check.html.j2", folder / "cross_check.html", **ctx)
-    data = {"code_version": cc.code_version, "source": cc.source, **cc.summary(),
+def write_cross_check_json(out_dir: Path, cc: CrossCheck) -> Path:
+    """``out_dir/GNC/cross_check.json``: the summary and each row's status."""
+    path = Path(out_dir) / "GNC" / "cross_check.json"
+    data = {"source_version": cc.source_version, "source": cc.source, **cc.summary(),
             "rows_status": {r.equation.number: r.status for r in cc.rows}}
-    atomic_write_text(folder / "cross_check.json", json.dumps(data, indent=1) + "\n")
-    return cc
+    atomic_write_text(path, json.dumps(data, indent=1) + "\n")
+    return path

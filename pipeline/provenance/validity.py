@@ -1,0 +1,117 @@
+"""One predicate per artefact kind: may this stored artefact be reused? (architecture §9)
+
+Each predicate reads only what the artefact records about itself and compares it with the
+keys of :mod:`pipeline.provenance.keys`; an artefact that cannot be read is not current (it
+is made again, never believed).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import pyarrow.parquet as pq
+
+from pipeline.analysis.record import try_read_analysis
+from pipeline.errors import LogError
+from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.provenance.keys import analysis_version, file_digest, report_version, sim_version
+from pipeline.spec import Spec
+
+FINISHED = ("complete", "failed", "diverged")  # a run that ended (a failed one fails again)
+
+
+def current_log(path: Path, spec: Spec) -> LogMeta | None:
+    """The log's metadata if it is a finished run of this spec (content hash), this robot
+    file (content hash) and this simulator (sources and libraries), else None. A
+    ``complete`` log must hold every step."""
+    try:
+        meta = read_meta(path)
+        rows = num_rows(path)
+    except LogError:
+        return None
+    if (meta.spec_hash != spec.spec_hash or meta.sim_version != sim_version()
+            or meta.status not in FINISHED
+            or meta.robot_hash != file_digest(spec.robot_path)
+            or (meta.status == "complete" and rows != spec.n_steps)):
+        return None
+    return meta
+
+
+def _made_from(record: dict, log: Path, meta: LogMeta) -> bool:
+    """The record names this log, and its content: a log re-run bitwise keeps its analysis,
+    a log changed in any byte does not."""
+    return (Path(str(record.get("log", ""))).resolve() == Path(log).resolve()
+            and record.get("spec_hash") == meta.spec_hash
+            and record.get("sim_version") == meta.sim_version
+            and record.get("log_sha256") == file_digest(log))
+
+
+def current_analysis(path: Path, log: Path, meta: LogMeta,
+                     against: tuple[Path, LogMeta] | None = None) -> dict | None:
+    """The analysis record at ``path`` if it was made from this log by this analysis code,
+    compared with ``against`` exactly when one is given, else None."""
+    record = try_read_analysis(path)
+    if (record is None or record.get("analysis_version") != analysis_version()
+            or not _made_from(record, log, meta)):
+        return None
+    comparison = record.get("comparison")
+    if against is None:
+        return record if comparison is None else None
+    if not isinstance(comparison, dict) or not _made_from(comparison.get("other", {}),
+                                                          *against):
+        return None
+    return record
+
+
+def current_sweep(table: Path, base_spec_hash: str, points: Iterable[str]) -> bool:
+    """A sweep table of this grid whose every point is complete, made by this simulator and
+    analysis code (each point was itself checked by the predicates above when it ran)."""
+    try:
+        t = pq.read_table(table)
+    except OSError:
+        return False
+    md = {k.decode(): v.decode() for k, v in (t.schema.metadata or {}).items()}
+    df = t.to_pandas()
+    return (md.get("pipeline.sim_version") == sim_version()
+            and md.get("pipeline.analysis_version") == analysis_version()
+            and md.get("pipeline.base_spec_hash") == base_spec_hash
+            and list(df["point"]) == list(points)
+            and bool((df["status"] == "complete").all()))
+
+
+def current_baselines(path: Path, names: list[str], pinned_dir: Path) -> dict | None:
+    """``baselines.json`` if it re-ran these baselines with this simulator against these
+    pinned files (by hash), else None."""
+    try:
+        old = json.loads(Path(path).read_text())
+        ok = (old["sim_version"] == sim_version() and sorted(old["baselines"]) == names
+              and all(file_digest(Path(pinned_dir) / n / "run.parquet")
+                      == old["baselines"][n].get("pinned_sha256") for n in names))
+    except (OSError, KeyError, json.JSONDecodeError, TypeError, AttributeError):
+        return None
+    return old if ok else None
+
+
+def report_inputs(out: Path) -> list[Path]:
+    """The files the reports under ``out`` are rendered from (not the reports themselves)."""
+    out = Path(out)
+    patterns = ("*/analysis.json", "*/directions.parquet", "claims.json", "bench.json",
+                "baselines.json", "sweeps/*/sweep.parquet")
+    return sorted(p for pat in patterns for p in out.glob(pat))
+
+
+def report_key(out: Path) -> str:
+    """The key of the reports under ``out``: the renderer's version and every input's hash
+    (the logs an analysis names are keyed through it: a changed log is a changed record)."""
+    parts = {p.relative_to(out).as_posix(): file_digest(p) for p in report_inputs(out)}
+    return json.dumps({"report_version": report_version(), "inputs": parts}, sort_keys=True)
+
+
+def current_report(out: Path, stamp: Path) -> bool:
+    """Whether the reports under ``out`` were rendered from these inputs by this code."""
+    try:
+        return Path(stamp).read_text() == report_key(out)
+    except OSError:
+        return False

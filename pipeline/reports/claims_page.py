@@ -1,0 +1,22 @@
+"""``CLAIMS.md`` and ``CLAIMS.html``: the evaluated claims register, rendered."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.claims.evaluate import ClaimsOutcome
+from pipeline.claims.seed_note import fmt
+from pipeline.paths import display_path
+from pipeline.reports.templating import render
+
+STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
+
+
+def render_claims(outcome: ClaimsOutcome, out_dir: Path) -> Path:
+    """Render the register beside its ``claims.json``; returns the Markdown page."""
+    ctx = {"results": outcome.results, "claims_file": display_path(outcome.claims_file.source),
+           "note_rows": outcome.note_rows, "fmt": fmt, "code_version": outcome.source_version,
+           "counts": {s: outcome.count(s) for s in STATUSES}}
+    md = render("claims.md.j2", Path(out_dir) / "CLAIMS.md", **ctx)
+    render("claims.html.j2", Path(out_dir) / "CLAIMS.html", **ctx)
+    return md
