@@ -20,3 +20,14 @@ def code_version() -> str:
             h.update(p.read_bytes())
             h.update(b"\0")
     return h.hexdigest()[:16]
+
+
+def package_version() -> str:
+    """The release of the installed package (pyproject.toml's ``version``), or ``unknown``
+    when the package runs from a checkout that was never installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("breve-pipeline")
+    except PackageNotFoundError:
+        return "unknown"
