@@ -16,6 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import MaxNLocator
 
 from pipeline.logs import atomic_write_bytes, read_columns
 from pipeline.sim.sampling import scale_by_svd
@@ -117,15 +118,14 @@ def _line_kw(st: RunStyle, j: int, n_runs: int, n_points: int) -> dict:
     """Line keywords for the j-th of n_runs overlaid runs: earlier runs drawn wider beneath
     later ones, and markers staggered along the line, so coinciding lines all show."""
     every = max(n_points // 8, 1)
-    return {"color": st.color, "ls": st.ls, "lw": 1.0 + 1.6 * (n_runs - 1 - j) / max(n_runs, 1),
+    return {"color": st.color, "ls": st.ls, "lw": 1.0 + 2.4 * (n_runs - 1 - j) / max(n_runs, 1),
             "marker": st.marker, "ms": 4.5, "mfc": "none",
             "markevery": (int(j * every / max(n_runs, 1)), every), "zorder": 2 + j}
 
 
-def _legend_right(fig, ax) -> None:
-    """One legend for the figure, right of the axes, so it hides no data."""
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
+def _legend_right(ax) -> None:
+    """The legend right of the axes, level with its top, so it hides no data."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
 
 
 def label(text: str) -> str:
@@ -160,7 +160,7 @@ def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
         top.semilogy(c["t"], np.where(w > 0, w, np.nan), label=label(r.name),
                      **_line_kw(styles[r.name], j, n, len(w)))
     top.set(title="bus angular rate ‖ω_b‖ (log scale)", xlabel="t (s)", ylabel="‖ω_b‖ (rad/s)")
-    top.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    _legend_right(top)
     axes = lower.subplots(n, 2, sharex=True, sharey="col", squeeze=False)
     lower.suptitle("the last second, one row per run: bus yaw rate ω_b,z = v̆[2] (left) and "
                    "camera roll rate ω_e,z = v̆[8] (right)", fontsize=9)
@@ -230,9 +230,11 @@ def eigenvalues(run: RunData, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(5, 5))
     t = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(t), np.sin(t), "k-", lw=0.8, label="unit circle")
-    for integ, mk in (("explicit", "x"), ("imex", "o")):
+    # Black and grey: here the marks are the integrators, and the colours of the runs (the
+    # palette) would say "another run".
+    for integ, mk, col in (("explicit", "x", "k"), ("imex", "o", "0.5")):
         ev = th["maps"][integ]["eigenvalues"]
-        ax.plot(ev["real"], ev["imag"], mk, mfc="none", ms=7,
+        ax.plot(ev["real"], ev["imag"], mk, color=col, mfc="none", ms=7,
                 label=f"{integ}: ρ = {th['maps'][integ]['spectral_radius']:.4g}")
     lim = max(1.2, 1.1 * max(m["spectral_radius"] for m in th["maps"].values()))
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=f"Re λ ({DIMLESS})",
@@ -269,7 +271,7 @@ def gamma_ramp(runs: list[RunData], path: Path,
             label=f"scale_by_svd (low {low:g}, high {high:g}, floor {floor:g})")
     ax.set(title="γ ramp and the logged s_min_G (every 10th step)", ylabel=f"γ ({DIMLESS})",
            ylim=(0, 1.08))
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    _legend_right(ax)
     strips.set_yticks(range(n), [label(r.name) for r in runs], fontsize=8)
     strips.set(ylim=(n - 0.5, -0.5), xlabel="σ_min(Γ) (SI mixed)", ylabel="run")
     for ax_ in (ax, strips):
@@ -296,7 +298,7 @@ def conditioning(runs: list[RunData], path: Path,
     for ax in axes:
         ax.set_xlabel("t (s)")
     fig.tight_layout()
-    _legend_right(fig, axes[0])
+    _legend_right(axes[0])
     _save(fig, path)
 
 
@@ -314,7 +316,7 @@ def dt_mu(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
     ax.axhline(2.0, color="k", lw=1.0, ls="--", label="2: forward-Euler bound")
     ax.set(title="dt·μ_max over the mission", xlabel="t (s)",
            ylabel=f"dt·μ_max ({DIMLESS})", ylim=(0, None))
-    _legend_right(fig, ax)
+    _legend_right(ax)
     _save(fig, path)
 
 
@@ -345,6 +347,7 @@ def sweep_map(table: Path, path: Path) -> str | None:
             ax.axvline(float(df["dt_star_damping"].median()), color="k", ls="--", lw=0.8,
                        label=f"dt*_damping = {float(df['dt_star_damping'].median()):.4g} s")
         ax.set(title=ttl, xlabel="mission.dt (s)", ylabel=ylab)
+        ax.xaxis.set_major_locator(MaxNLocator(6))  # dt ticks of 4 digits collide otherwise
     a2.axhline(2.0, color="r", lw=0.8)
     a1.legend()
     fig.suptitle(label(f"dt sweep {table.parent.name}"))

@@ -199,7 +199,8 @@ def render_all(out: Path) -> list[Path]:
     figs, skipped = make_figures(out, runs)
     fig_files = {f.file for f in figs}
     cc = write_cross_check(out)
-    written = [out / "GNC" / "cross_check.md", out / "GNC" / "cross_check.html"]
+    written = [out / "GNC" / "cross_check.md", out / "GNC" / "cross_check.html",
+               out / "GNC" / "cross_check.json"]
     mechanisms = []
     for r in runs:
         if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
@@ -211,8 +212,9 @@ def render_all(out: Path) -> list[Path]:
         mechanisms.append({"run": r, "verdict": ctx["verdict"], "against": ctx["names"][1],
                            "eig": f"figures/eig_{r.folder}.png" in fig_files})
     _remove_stale(out, {*written, *(out / f.file for f in figs)})
-    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "baselines.md", "baselines.json",
-                      "bench.md", "bench.json", "ci/CLAIMS.html", "ci/CLAIMS.md")
+    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "claims.json", "baselines.md",
+                      "baselines.json", "bench.md", "bench.json", "ci/CLAIMS.html",
+                      "ci/CLAIMS.md", "ci/claims.json")
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
