@@ -95,13 +95,18 @@ def run_style(name: str) -> RunStyle:
 
 
 def palette(names: list[str]) -> dict[str, RunStyle]:
-    """A distinct style per run: :func:`run_style`, and a spare colour (in name order) for a
-    run whose colour another run already has. Computed once over a report's runs, so every
-    figure of the report draws a run alike."""
+    """A distinct style per run: :func:`run_style`, and a spare colour for a run whose colour
+    another run already has. Names that say their role or robot are served first, so
+    ``nominal`` keeps its colour beside a user's ``alpha``. Computed once over a report's
+    runs, so every figure of the report draws a run alike."""
     out: dict[str, RunStyle] = {}
     taken: set[str] = set()
     spare = iter(_SPARE * (1 + len(names) // len(_SPARE)))
-    for name in sorted(set(names)):
+
+    def says(name: str) -> bool:
+        return any(k in name.lower() for k in (*_ROLES, "nominal", "servicer"))
+
+    for name in sorted(set(names), key=lambda n: (not says(n), n)):
         st = run_style(name)
         if st.color in taken:
             st = RunStyle(next(spare), st.ls, st.marker)
@@ -172,7 +177,7 @@ def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
             ax.plot(c["t"][last], y, color=st.color, lw=0.8, marker=".", ms=2.5)
             ax.set_title(label(f"{r.name}: {what}, peak-to-peak {np.ptp(y):.2g} rad/s"),
                          fontsize=8, loc="left", color=st.color)
-            ax.set_ylabel("rad/s")
+            ax.set_ylabel(f"{what} (rad/s)")
         axes[i, 0].set_xlabel("t (s)" if i == n - 1 else "")
         axes[i, 1].set_xlabel("t (s)" if i == n - 1 else "")
     _save(fig, path)
