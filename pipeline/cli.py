@@ -160,8 +160,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "the lists (no default: at least one is needed; "
                    "e.g. --set mission.dt=0.01,0.02,0.03)")
     s.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="address of an existing Dask scheduler (default: an embedded "
-                   "LocalCluster; e.g. --scheduler tcp://10.0.0.5:8786)")
+                   help="address of an existing Dask scheduler (default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
+                   "e.g. --scheduler tcp://10.0.0.5:8786)")
     s.add_argument("--workers", type=int, default=2, metavar="N",
                    help="workers of the embedded cluster or of SLURM "
                    "(default: 2; e.g. --workers 4)")
