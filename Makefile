@@ -10,16 +10,25 @@ REPORTS := generated_reports
 MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 
-.PHONY: all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
+.PHONY: help all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
+
+.DEFAULT_GOAL := all
+
+## help: list the targets, one line each (from the `## target: …` comments of this file)
+help:
+	@awk '/^## [a-z-]+: / { sub(/^## /, ""); split($$0, a, ": "); \
+		printf "  make %-10s %s\n", a[1], substr($$0, length(a[1]) + 3) }' $(firstword $(MAKEFILE_LIST))
 
 # The claims first (they run what is missing, the sweeps included), then the reports, which
 # link the register; the reports are rendered even when a claim fails, and the recipe then
 # ends with the claims' own code (1: make prints "Error 1"; GNU make itself exits 2 whenever a
 # recipe fails, its only code for that).
+## all: set-up, missions, analyses, sweeps, claims and every report (generated_reports/index.html)
 all: $(STAMP)
 	@$(PY) -m pipeline claims --claims claims --out $(REPORTS); rc=$$?; \
 	$(MAKE) --no-print-directory report || exit $$?; exit $$rc
 
+## setup: create .venv and install the pinned versions of constraints.txt
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
@@ -30,6 +39,7 @@ $(STAMP): pyproject.toml constraints.txt
 
 # Refresh the pinned versions: a throw-away venv, the ranges of pyproject.toml, pip freeze.
 # Deliberate: run `make baselines` after it, and re-pin only with a reason.
+## lock: refresh constraints.txt from pyproject.toml's ranges (then: make baselines)
 lock:
 	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
 	.venv-lock/bin/python -m pip install --quiet --upgrade pip
@@ -42,6 +52,7 @@ lock:
 # artefact is current (a log: the simulator's sources, the spec, the robot file and the
 # numerical libraries; an analysis: its logs and the analysis' sources; the reports: their
 # inputs and templates), says "up to date" and reuses it, or makes it.
+## runs: simulate the default missions into logs/<mission>/run.parquet
 runs: $(STAMP)
 	$(PY) -m pipeline run $(MISSIONS) --out $(LOGS)
 
@@ -49,24 +60,30 @@ runs: $(STAMP)
 ANALYSES := nominal:omega_ripple_dt010 omega_ripple_imex:omega_ripple_dt010 \
 	omega_ripple_reach:omega_ripple_dt010 omega_ripple_dt010: \
 	servicer_nominal:servicer_dt010 servicer_imex:servicer_dt010 servicer_dt010:
+## analyses: analyse the default missions into generated_reports/<mission>/analysis.json
 analyses: runs
 	@for pair in $(ANALYSES); do m=$${pair%%:*}; a=$${pair#*:}; \
 		$(PY) -m pipeline analyze $(LOGS)/$$m/run.parquet \
 			$${a:+--against $(LOGS)/$$a/run.parquet} --out $(REPORTS) || exit $$?; done
 
+## report: render the figures, reports and generated_reports/index.html
 report: analyses
 	$(PY) -m pipeline report --out $(REPORTS)
 
+## claims: evaluate the claims register (pipeline/specs/claims.yaml) -> generated_reports/CLAIMS.md
 claims: $(STAMP)
 	$(PY) -m pipeline claims --claims claims --out $(REPORTS)
 
 # The claim gate of CI: the same claims on the short missions.
+## claims-ci: the same claims on the short CI missions -> generated_reports/ci/
 claims-ci: $(STAMP)
 	$(PY) -m pipeline claims --claims claims_ci --out $(REPORTS)/ci
 
+## test: run the test suite (pytest)
 test: $(STAMP)
 	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; exit $$rc
 
+## lint: check the code with ruff
 lint: $(STAMP)
 	$(PY) -m ruff check pipeline tests
 
@@ -75,20 +92,25 @@ lint: $(STAMP)
 # The bus-inertia sweep (claim C27) runs with the claims (pipeline/specs/claims.yaml, sweeps.inertia).
 SWEEP_DTS := 0.005,0.01,0.015,0.0175,0.02,0.0225,0.025,0.03,0.04
 SWEEP_WORKERS ?= 2
+## sweep: the default dt sweep on Dask -> generated_reports/sweeps/nominal_dt/
 sweep: $(STAMP)
 	$(PY) -m pipeline sweep nominal --set mission.dt=$(SWEEP_DTS) --set mission.duration=20 \
 		--workers $(SWEEP_WORKERS) --name nominal_dt --logs $(LOGS)/sweeps --out $(REPORTS)/sweeps
 
+## bench: simulator and analysis cost against the Pinocchio floor -> generated_reports/bench.md
 bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)
 
+## baselines: compare the pinned baseline logs under logs/baselines/ with fresh runs
 baselines: $(STAMP)
 	$(PY) -m pipeline.claims.baselines check
 
+## repin: re-pin the baseline logs under logs/baselines/ (deliberately, with a reason)
 repin: $(STAMP)
 	$(PY) -m pipeline.claims.baselines repin
 
 # Compiled kernels: all but the newest cache folder (one per version of pipeline/sim/*.py).
+## clean: remove generated logs, reports and all but the newest compiled kernels
 clean:
 	rm -rf $(REPORTS) $(LOGS)/nominal $(LOGS)/omega_ripple_* $(LOGS)/servicer_* $(LOGS)/short_* \
 		$(LOGS)/sweeps

@@ -1,4 +1,4 @@
-"""Command line: ``python -m pipeline {run,analyze,report,claims,sweep,bench}``.
+"""Command line: ``python -m pipeline STAGE …``, one subcommand per stage.
 
 Exit codes: 0 success; 1 a check, claim or run failed; 2 bad input (one line, no traceback).
 This is the one place where the pipeline's error kinds become exit codes.
@@ -11,6 +11,12 @@ import sys
 from pathlib import Path
 
 from pipeline.errors import PipelineError, RunFailed
+
+
+def _cmd_validate(a: argparse.Namespace) -> int:
+    from pipeline.validate import validate_command
+
+    return validate_command(a.spec)
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
@@ -94,56 +100,140 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     return bench_command(a)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="command", required=True)
+SPEC_HELP = ("a spec name on the spec search path (beside, $BREVE_SPEC_PATH, the shipped "
+             "pipeline/specs/) or a path to a .yaml file (e.g. nominal or my/mission.yaml)")
 
-    r = sub.add_parser("run", help="simulate a mission spec into DIR/<name>/run.parquet")
-    r.add_argument("spec", nargs="+",
-                   help="spec names (on the spec search path: beside, BREVE_SPEC_PATH, the "
-                        "shipped specs) or paths to .yaml files")
-    r.add_argument("--out", default="logs", help="log folder (default: logs)")
+DESCRIPTION = """\
+Simulate a free-floating space robot (a spacecraft bus carrying a 6-DoF arm with an
+inspection camera) from a mission spec, analyse its logs, and report what they show.
+A typical session: validate, run, analyze, report; `make all` does every stage."""
+
+EPILOG = """\
+examples:
+  python -m pipeline validate nominal
+  python -m pipeline run nominal
+  python -m pipeline analyze logs/nominal/run.parquet --against logs/omega_ripple_dt010/run.parquet
+  python -m pipeline report
+  python -m pipeline STAGE --help      (the options of one stage)
+
+exit codes: 0 success; 1 a run failed or diverged, a check or a claim failed;
+2 bad input (one line naming the field or the file)."""
+
+
+def _formatter(prog: str) -> argparse.HelpFormatter:
+    # Raw: the description and the examples keep their lines; wide: help texts on one line.
+    return argparse.RawDescriptionHelpFormatter(prog, max_help_position=32, width=100)
+
+
+def _stage(sub, name: str, summary: str, example: str) -> argparse.ArgumentParser:
+    """One stage's subcommand: its one-line summary in the top-level list, an example below
+    its own options."""
+    return sub.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".",
+                          epilog=f"example:\n  python -m pipeline {name} {example}",
+                          formatter_class=_formatter)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pipeline.version import package_version
+
+    p = argparse.ArgumentParser(prog="python -m pipeline", description=DESCRIPTION,
+                                epilog=EPILOG, formatter_class=_formatter)
+    p.add_argument("--version", action="version",
+                   version=f"breve-pipeline {package_version()}",
+                   help="print the release and exit (e.g. breve-pipeline 0.1.0)")
+    sub = p.add_subparsers(dest="command", required=True, title="stages", metavar="STAGE")
+
+    v = _stage(sub, "validate", "check a spec and print what its run would cost, without "
+               "running it", "nominal")
+    v.add_argument("spec", help=SPEC_HELP)
+    v.set_defaults(func=_cmd_validate)
+
+    r = _stage(sub, "run", "simulate a mission spec into DIR/<name>/run.parquet",
+               "nominal --out logs")
+    r.add_argument("spec", nargs="+", help=f"one or more specs, each {SPEC_HELP}")
+    r.add_argument("--out", default="logs", metavar="DIR",
+                   help="log folder; the log is DIR/<spec name>/run.parquet "
+                   "(default: logs; e.g. --out /tmp/logs)")
     r.add_argument("--force", action="store_true",
-                   help="run even when the log is current (same spec, robot and simulator)")
+                   help="run even when the log is current: same spec, robot file and "
+                   "simulator (default: off; e.g. --force)")
     r.set_defaults(func=_cmd_run)
 
-    an = sub.add_parser("analyze", help="analyse a log into DIR/<name>/analysis.json")
-    an.add_argument("log")
-    an.add_argument("--against", help="a second log to compare with (e.g. the dt010 run)")
-    an.add_argument("--out", default="generated_reports")
-    an.add_argument("--window-start", type=float, default=None,
-                    help="analysis window start in seconds (default: half the mission)")
+    an = _stage(sub, "analyze", "analyse a log into DIR/<name>/analysis.json",
+                "logs/nominal/run.parquet --against logs/omega_ripple_dt010/run.parquet")
+    an.add_argument("log", help="a run's log, as `run` wrote it "
+                    "(e.g. logs/nominal/run.parquet)")
+    an.add_argument("--against", metavar="LOG2",
+                    help="a second log of the same robot to compare with; different dt is "
+                    "the point, different durations or windows are named in the output "
+                    "(default: none; e.g. --against logs/omega_ripple_dt010/run.parquet)")
+    an.add_argument("--out", default="generated_reports", metavar="DIR",
+                    help="report folder; writes DIR/<spec name>/analysis.json and "
+                    "directions.parquet (default: generated_reports; e.g. --out /tmp/reports)")
+    an.add_argument("--window-start", type=float, default=None, metavar="SECONDS",
+                    help="analysis window start in seconds, to the end of the log "
+                    "(default: half the mission; e.g. --window-start 30)")
     an.add_argument("--force", action="store_true",
-                    help="analyse even when the record is current (same logs and analysis code)")
+                    help="analyse even when the record is current: same logs and analysis "
+                    "code (default: off; e.g. --force)")
     an.set_defaults(func=_cmd_analyze)
 
-    rp = sub.add_parser("report", help="render the reports under generated_reports/")
-    rp.add_argument("--out", default="generated_reports")
+    rp = _stage(sub, "report", "render the figures, reports and index.html of a report folder",
+                "--out generated_reports")
+    rp.add_argument("--out", default="generated_reports", metavar="DIR",
+                    help="report folder holding the analyses; the reports are written there "
+                    "(default: generated_reports; e.g. --out /tmp/reports)")
     rp.add_argument("--force", action="store_true",
-                    help="render even when the reports are current (same inputs and renderer)")
+                    help="render even when the reports are current: same inputs and renderer "
+                    "(default: off; e.g. --force)")
     rp.set_defaults(func=_cmd_report)
 
-    c = sub.add_parser("claims", help="evaluate the claims register")
-    c.add_argument("--claims", default="claims",
-                   help="claims register: a name on the spec search path or a .yaml path "
-                        "(default: claims, the shipped register)")
-    c.add_argument("--out", default="generated_reports")
+    c = _stage(sub, "claims", "evaluate the claims register, running what is missing",
+               "--claims claims_ci --out generated_reports/ci")
+    c.add_argument("--claims", default="claims", metavar="FILE",
+                   help="claims file: the claims and the runs and sweeps they need; a name on "
+                   "the spec search path or a .yaml path (default: claims, the shipped "
+                   "register; e.g. --claims claims_ci or --claims my_claims.yaml)")
+    c.add_argument("--out", default="generated_reports", metavar="DIR",
+                   help="report folder for CLAIMS.md, CLAIMS.html and claims.json "
+                   "(default: generated_reports; e.g. --out generated_reports/ci)")
     c.set_defaults(func=_cmd_claims)
 
-    s = sub.add_parser("sweep", help="run a grid of overrides of one spec on Dask")
-    s.add_argument("spec")
-    s.add_argument("--set", action="append", default=[], metavar="KEY=V1,V2,...")
-    s.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
-    s.add_argument("--workers", type=int, default=2)
-    s.add_argument("--slurm", action="store_true", help="start workers through dask-jobqueue")
-    s.add_argument("--name", default=None, help="sweep name (default: from spec and keys)")
-    s.add_argument("--logs", default="logs/sweeps")
-    s.add_argument("--out", default="generated_reports/sweeps")
+    s = _stage(sub, "sweep", "run a grid of overrides of one spec on Dask",
+               "nominal --set mission.dt=0.01,0.03 --set mission.duration=20")
+    s.add_argument("spec", help=SPEC_HELP)
+    s.add_argument("--set", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="a spec key and its values, repeatable; the grid is the product of "
+                   "the lists (no default: at least one is needed; "
+                   "e.g. --set mission.dt=0.01,0.02,0.03)")
+    s.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="address of an existing Dask scheduler (default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
+                   "e.g. --scheduler tcp://10.0.0.5:8786)")
+    s.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="workers of the embedded cluster or of SLURM "
+                   "(default: 2; e.g. --workers 4)")
+    s.add_argument("--slurm", action="store_true",
+                   help="start the workers as SLURM jobs through dask-jobqueue "
+                   "(default: off; e.g. --slurm --workers 16)")
+    s.add_argument("--name", default=None,
+                   help="sweep name, the folder of its logs and table (default: from the "
+                   "spec and the keys; e.g. --name nominal_dt)")
+    s.add_argument("--logs", default="logs/sweeps", metavar="DIR",
+                   help="log folder; each point's log is DIR/<sweep>/<point>/run.parquet "
+                   "(default: logs/sweeps; e.g. --logs /scratch/sweeps)")
+    s.add_argument("--out", default="generated_reports/sweeps", metavar="DIR",
+                   help="table folder; writes DIR/<sweep>/sweep.parquet "
+                   "(default: generated_reports/sweeps; e.g. --out /tmp/sweeps)")
     s.set_defaults(func=_cmd_sweep)
 
-    b = sub.add_parser("bench", help="measure simulator and analysis cost against the floor")
-    b.add_argument("--out", default="generated_reports")
-    b.add_argument("--quick", action="store_true", help="fewer repeats and shorter logs")
+    b = _stage(sub, "bench", "measure simulator and analysis cost against the Pinocchio floor",
+               "--quick")
+    b.add_argument("--out", default="generated_reports", metavar="DIR",
+                   help="folder for bench.json and bench.md "
+                   "(default: generated_reports; e.g. --out /tmp/bench)")
+    b.add_argument("--quick", action="store_true",
+                   help="fewer repeats and shorter logs (default: off; e.g. --quick)")
     b.set_defaults(func=_cmd_bench)
     return p
 

@@ -1,10 +1,12 @@
 """The HTML reports in a real browser: headless Chromium (Debian's ``chromium``).
 
+The report is the shared short-run report (``report_fixtures.built``) copied and given a
+two-point dt sweep, so that the index has every kind of artefact, the sweep table included.
 Each page is copied beside itself with a probe script first in <head>: it records console
 errors, uncaught exceptions and failed resource loads, and on ``load`` writes, into the DOM,
 whether every <img> decoded (naturalWidth > 0). Chromium's ``--dump-dom`` returns the DOM, so
-no driver or extra package is needed. A screenshot of each page is saved under
-``generated_reports/browser/``.
+no driver or extra package is needed. A full-page screenshot of each page is saved under
+``generated_reports/browser/`` (``index.png``, ``t_nominal_mechanism.png``) to be looked at.
 """
 
 from __future__ import annotations
@@ -14,12 +16,16 @@ import re
 import shutil
 import subprocess
 import tempfile
+from functools import cache
+from html.parser import HTMLParser
 from pathlib import Path
+from urllib.parse import unquote, urlsplit
 
 import pytest
 from report_fixtures import built
 
 from pipeline.paths import PROJECT_ROOT
+from pipeline.reports.render import render_all
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = [pytest.mark.browser,
@@ -55,7 +61,8 @@ PROBE = """<script>
     });
     var out = document.createElement("pre");
     out.id = "probe-result";
-    out.textContent = JSON.stringify({images: imgs, errors: errors});
+    out.textContent = JSON.stringify({images: imgs, errors: errors,
+                                      height: document.documentElement.scrollHeight});
     document.body.appendChild(out);
   });
 })();
@@ -88,17 +95,76 @@ def probe(page: Path) -> dict:
     return result
 
 
-def screenshot(page: Path, name: str) -> Path:
+def screenshot(page: Path, name: str, height: int) -> Path:
+    """A screenshot of ``page`` in a window ``height`` pixels tall (the page's full length)."""
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     target = SCREENSHOTS / name
     target.unlink(missing_ok=True)
-    chromium(page, f"--screenshot={target}", "--window-size=1280,2400", "--hide-scrollbars")
+    chromium(page, f"--screenshot={target}", f"--window-size=1280,{height}",
+             "--hide-scrollbars")
     return target
+
+
+@cache
+def report_with_sweep() -> Path:
+    """The shared report, copied, with a real two-point dt sweep of t_nominal (each point run
+    and analysed in this process, the table written as the sweep driver writes it), rendered."""
+    from pipeline.sweep.driver import plan_sweep
+    from pipeline.sweep.point import run_point
+    from pipeline.sweep.results import make_table, write_sweep_table
+
+    b = built()
+    out = b.root / "reports_with_sweep"
+    if out.exists():
+        shutil.rmtree(out)
+    shutil.copytree(b.reports, out)
+    sweep = plan_sweep(b.spec_file("t_nominal"), ["mission.dt=0.01,0.03"], "t_dt",
+                       b.root / "sweep_logs", out / "sweeps")
+    records = [run_point(p.spec, str(sweep.log_dir)) for p in sweep.points]
+    df = make_table(sweep.keys, [p.overrides for p in sweep.points], records)
+    write_sweep_table(df, sweep.table_path, {"pipeline.sweep": sweep.name,
+                                             "pipeline.keys": ",".join(sweep.keys)})
+    render_all(out)
+    return out
+
+
+class _Links(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.links: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        for key, value in attrs:
+            if key in ("href", "src") and value:
+                self.links.append(value)
+
+
+def link_problems(page: Path, root: Path) -> list[str]:
+    """Relative links of ``page`` that resolve to no file, and files under ``root`` that no
+    link of ``page`` reaches (hidden files, the page itself and screenshots aside)."""
+    parser = _Links()
+    parser.feed(page.read_text())
+    linked, wrong = set(), []
+    for link in parser.links:
+        parts = urlsplit(link)
+        if parts.scheme or link.startswith("#"):
+            continue
+        target = (page.parent / unquote(parts.path)).resolve()
+        if not target.is_file():
+            wrong.append(f"dead link {link}")
+        linked.add(target)
+    for f in sorted(root.rglob("*")):
+        rel = f.relative_to(root)
+        if (f.is_file() and f.resolve() != page.resolve() and f.resolve() not in linked
+                and not any(part.startswith(".") for part in rel.parts)
+                and rel.parts[0] != "browser"):
+            wrong.append(f"not linked: {rel.as_posix()}")
+    return wrong
 
 
 @pytest.mark.parametrize("page", ["index.html", "t_nominal/mechanism.html"])
 def test_page_loads_every_figure_without_errors(page):
-    path = built().reports / page
+    path = report_with_sweep() / page
     result = probe(path)
     images = result["images"]
     assert images, f"{page}: no <img> on the page"
@@ -106,8 +172,26 @@ def test_page_loads_every_figure_without_errors(page):
     assert not broken, f"{page}: figures that did not load: {broken}"
     assert not result["errors"], f"{page}: {result['errors']}"
     assert not result["stderr_errors"], f"{page}: {result['stderr_errors']}"
-    shot = screenshot(path, page.replace("/", "_").replace(".html", ".png"))
+    shot = screenshot(path, page.replace("/", "_").replace(".html", ".png"),
+                      result["height"] + 40)
     assert shot.is_file() and shot.stat().st_size > 10_000
+
+
+def test_the_index_links_every_artefact_and_every_link_resolves():
+    root = report_with_sweep()
+    assert (root / "sweeps" / "t_dt" / "sweep.parquet").is_file()
+    assert (root / "figures" / "sweep_t_dt.png").is_file()
+    assert link_problems(root / "index.html", root) == []
+
+
+def test_the_link_check_can_fail(tmp_path):
+    (tmp_path / "sweeps" / "s").mkdir(parents=True)
+    (tmp_path / "sweeps" / "s" / "sweep.parquet").write_bytes(b"x")
+    (tmp_path / "a.json").write_text("{}")
+    page = tmp_path / "index.html"
+    page.write_text('<a href="a.json">a</a> <a href="gone.md">b</a> <img src="f.png">')
+    assert link_problems(page, tmp_path) == ["dead link gone.md", "dead link f.png",
+                                             "not linked: sweeps/s/sweep.parquet"]
 
 
 def test_the_probe_catches_a_missing_figure(tmp_path):

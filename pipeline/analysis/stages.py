@@ -395,7 +395,7 @@ COMPARE_ROWS = (
     ("discrete-map dominant eigenvalue (imag)", ("theory", "eig_dominant", "imag")),
     ("spectral radius", ("theory", "spectral_radius")),
     ("alignment |cos|", ("alignment", "abs_cos")),
-    ("median ‖Δv‖", ("velocity_jump", "median")),
+    ("median ‖Δv‖ (m/s, rad/s mixed: v is [v_b; ω_b; q̇])", ("velocity_jump", "median")),
     ("bus rate ω_b: lag-1 of its dominant component", ("bus_rate", "lag1")),
     ("bus rate ω_b: alternating RMS (rad/s)", ("bus_rate", "alternating_rms")),
     ("provenance max |Δσ_min|", ("provenance", "max_abs_s_min_G")),

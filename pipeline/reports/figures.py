@@ -16,11 +16,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import MaxNLocator
 
 from pipeline.logs import atomic_write_bytes, read_columns
 from pipeline.sim.sampling import scale_by_svd
 
-plt.rcParams.update({"figure.dpi": 100, "font.size": 9, "axes.grid": True, "grid.alpha": 0.3})
+# Legends at 8 pt at least: at the page's width a 6–7 pt legend is unreadable.
+plt.rcParams.update({"figure.dpi": 100, "font.size": 9, "legend.fontsize": 8,
+                     "axes.grid": True, "grid.alpha": 0.3})
+LEGEND_MIN_PT = 8.0
+DIMLESS = "dimensionless"
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,81 @@ class RunData:
             return None
 
 
+@dataclass(frozen=True)
+class RunStyle:
+    """How one run is drawn in every figure: colour, line style and marker."""
+
+    color: str
+    ls: str | tuple
+    marker: str
+
+
+# One style per run, the same in every figure and every report: the colour says which run
+# (robot and role), the line style and marker say the role, so runs whose lines coincide (the
+# nominal and imex missions share dt·μ_max) stay distinguishable, also in grey print.
+_ROLES = ("imex", "dt010", "reach", "unbounded")  # matched in the name; otherwise "nominal"
+_PALETTE = {
+    ("seed", "nominal"): "#d62728", ("seed", "dt010"): "#1f77b4", ("seed", "imex"): "#2ca02c",
+    ("seed", "reach"): "#ff7f0e", ("seed", "unbounded"): "#7f7f7f",
+    ("servicer", "nominal"): "#9467bd", ("servicer", "dt010"): "#17becf",
+    ("servicer", "imex"): "#8c564b", ("servicer", "reach"): "#e377c2",
+    ("servicer", "unbounded"): "#bcbd22",
+}
+_LINESTYLE = {"nominal": "-", "dt010": (0, (6, 2)), "imex": (0, (1.5, 1.5)),
+              "reach": (0, (6, 2, 1.5, 2)), "unbounded": (0, (3, 1, 1, 1, 1, 1))}
+_MARKER = {"nominal": "o", "dt010": "s", "imex": "^", "reach": "D", "unbounded": "x"}
+# For runs whose name gives a style another run already has (a user's own specs).
+_SPARE = ("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d",
+          "#31a354", "#756bb1", "#636363")
+
+
+def run_style(name: str) -> RunStyle:
+    """The style of a run from its name: robot (``servicer`` or the seed robot) and role."""
+    low = name.lower()
+    role = next((r for r in _ROLES if r in low), "nominal")
+    robot = "servicer" if "servicer" in low else "seed"
+    return RunStyle(_PALETTE[(robot, role)], _LINESTYLE[role], _MARKER[role])
+
+
+def palette(names: list[str]) -> dict[str, RunStyle]:
+    """A distinct style per run: :func:`run_style`, and a spare colour for a run whose colour
+    another run already has. Names that say their role or robot are served first, so
+    ``nominal`` keeps its colour beside a user's ``alpha``. Computed once over a report's
+    runs, so every figure of the report draws a run alike."""
+    out: dict[str, RunStyle] = {}
+    taken: set[str] = set()
+    spare = iter(_SPARE * (1 + len(names) // len(_SPARE)))
+
+    def says(name: str) -> bool:
+        return any(k in name.lower() for k in (*_ROLES, "nominal", "servicer"))
+
+    for name in sorted(set(names), key=lambda n: (not says(n), n)):
+        st = run_style(name)
+        if st.color in taken:
+            st = RunStyle(next(spare), st.ls, st.marker)
+        taken.add(st.color)
+        out[name] = st
+    return out
+
+
+def _styles(runs: list[RunData], styles: dict[str, RunStyle] | None) -> dict[str, RunStyle]:
+    return styles if styles is not None else palette([r.name for r in runs])
+
+
+def _line_kw(st: RunStyle, j: int, n_runs: int, n_points: int) -> dict:
+    """Line keywords for the j-th of n_runs overlaid runs: earlier runs drawn wider beneath
+    later ones, and markers staggered along the line, so coinciding lines all show."""
+    every = max(n_points // 8, 1)
+    return {"color": st.color, "ls": st.ls, "lw": 1.0 + 2.4 * (n_runs - 1 - j) / max(n_runs, 1),
+            "marker": st.marker, "ms": 4.5, "mfc": "none",
+            "markevery": (int(j * every / max(n_runs, 1)), every), "zorder": 2 + j}
+
+
+def _legend_right(ax) -> None:
+    """The legend right of the axes, level with its top, so it hides no data."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+
+
 def label(text: str) -> str:
     """Plain text for matplotlib (no mathtext from a spec name)."""
     return str(text).replace("$", r"\$")
@@ -69,23 +149,37 @@ def _cols(run: RunData, cols: list[str]) -> dict[str, np.ndarray]:
     return read_columns(run.log, cols)
 
 
-def rates(runs: list[RunData], path: Path) -> None:
-    """‖ω_b‖ over the mission, and the bus yaw rate ω_b,z and the camera roll rate over the
-    last second, per run."""
-    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(8, 8))
-    for r in runs:
-        c = _cols(r, ["t", "v_breve"])
-        w = c["v_breve"][:, 0:3]
-        a1.plot(c["t"], np.linalg.norm(w, axis=1), lw=0.8, label=label(r.name))
+def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = None) -> None:
+    """‖ω_b‖ over the mission, all runs on a log scale (top); below, one row per run (small
+    multiples, so no run hides another): the bus yaw rate ω_b,z and the camera roll rate over
+    the last second, on scales shared by column so amplitudes compare, each panel titled with
+    its peak-to-peak amplitude."""
+    styles = _styles(runs, styles)
+    n = len(runs)
+    fig = plt.figure(figsize=(10, 3.4 + 1.2 * n), layout="constrained")
+    upper, lower = fig.subfigures(2, 1, height_ratios=[3.4, 1.2 * n])
+    top = upper.subplots()
+    cols = [_cols(r, ["t", "v_breve"]) for r in runs]
+    for j, (r, c) in enumerate(zip(runs, cols, strict=True)):
+        w = np.linalg.norm(c["v_breve"][:, 0:3], axis=1)
+        top.semilogy(c["t"], np.where(w > 0, w, np.nan), label=label(r.name),
+                     **_line_kw(styles[r.name], j, n, len(w)))
+    top.set(title="bus angular rate ‖ω_b‖ (log scale)", xlabel="t (s)", ylabel="‖ω_b‖ (rad/s)")
+    _legend_right(top)
+    axes = lower.subplots(n, 2, sharex=True, sharey="col", squeeze=False)
+    lower.suptitle("the last second, one row per run: bus yaw rate ω_b,z = v̆[2] (left) and "
+                   "camera roll rate ω_e,z = v̆[8] (right)", fontsize=9)
+    for i, (r, c) in enumerate(zip(runs, cols, strict=True)):
         last = c["t"] >= c["t"][-1] - 1.0
-        for ax, i in ((a2, 2), (a3, 8)):
-            ax.plot(c["t"][last], c["v_breve"][last, i], lw=0.8, marker=".", ms=2,
-                    label=label(r.name))
-    a1.set(title="bus angular rate ‖ω_b‖", xlabel="t (s)", ylabel="rad/s")
-    a2.set(title="bus yaw rate ω_b,z = v̆[2] (last 1 s)", xlabel="t (s)", ylabel="rad/s")
-    a3.set(title="camera roll rate ω_e,z = v̆[8] (last 1 s)", xlabel="t (s)", ylabel="rad/s")
-    a1.legend(fontsize=7, ncols=2)
-    fig.tight_layout()
+        st = styles[r.name]
+        for k, (idx, what) in enumerate(((2, "ω_b,z"), (8, "ω_e,z"))):
+            ax, y = axes[i, k], c["v_breve"][last, idx]
+            ax.plot(c["t"][last], y, color=st.color, lw=0.8, marker=".", ms=2.5)
+            ax.set_title(label(f"{r.name}: {what}, peak-to-peak {np.ptp(y):.2g} rad/s"),
+                         fontsize=8, loc="left", color=st.color)
+            ax.set_ylabel(f"{what} (rad/s)")
+        axes[i, 0].set_xlabel("t (s)" if i == n - 1 else "")
+        axes[i, 1].set_xlabel("t (s)" if i == n - 1 else "")
     _save(fig, path)
 
 
@@ -110,25 +204,28 @@ def divergence_growth(run: RunData, path: Path) -> None:
     ax.axvline(g["first_limit_step"], color="r", lw=0.8,
                label=f"first limit flag (step {g['first_limit_step']})")
     ax.set(title=label(f"{run.name}: growth per step {g['growth_factor']:+.4g} (measured)"),
-           xlabel="step k", ylabel="rad/s")
-    ax.legend(fontsize=7, loc="upper left")
+           xlabel="step k", ylabel="|Δω_b| per step (rad/s)")
+    ax.legend(loc="upper left")
     _save(fig, path)
 
 
-def lag1_directions(runs: list[RunData], path: Path) -> None:
+def lag1_directions(runs: list[RunData], path: Path,
+                    styles: dict[str, RunStyle] | None = None) -> None:
     """Lag-1 autocorrelation of each singular direction of Γ, per run; dominant marked."""
+    styles = _styles(runs, styles)
     fig, ax = plt.subplots(figsize=(8, 3.6))
     width = 0.8 / max(len(runs), 1)
     for j, r in enumerate(runs):
         d = r.record["directions"]
         x = np.arange(len(d)) + (j - (len(runs) - 1) / 2) * width
-        ax.bar(x, [e["lag1"] for e in d], width, label=label(r.name))
+        ax.bar(x, [e["lag1"] for e in d], width, label=label(r.name),
+               color=styles[r.name].color)
         dom = r.record["dominant"]["index"]
         ax.plot(x[dom], d[dom]["lag1"], "k*", ms=9)
     ax.axhline(0, color="k", lw=0.6)
     ax.set(title="lag-1 autocorrelation per direction (★ dominant)", xlabel="direction i "
-           "(singular values descending)", ylabel="r₁", ylim=(-1.05, 1.05))
-    ax.legend(fontsize=7, ncols=3, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+           "(singular values descending)", ylabel=f"lag-1 r₁ ({DIMLESS})", ylim=(-1.05, 1.05))
+    ax.legend(ncols=3, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     _save(fig, path)
 
 
@@ -138,60 +235,93 @@ def eigenvalues(run: RunData, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(5, 5))
     t = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(t), np.sin(t), "k-", lw=0.8, label="unit circle")
-    for integ, mk in (("explicit", "x"), ("imex", "o")):
+    # Black and grey: here the marks are the integrators, and the colours of the runs (the
+    # palette) would say "another run".
+    for integ, mk, col in (("explicit", "x", "k"), ("imex", "o", "0.5")):
         ev = th["maps"][integ]["eigenvalues"]
-        ax.plot(ev["real"], ev["imag"], mk, mfc="none", ms=7,
+        ax.plot(ev["real"], ev["imag"], mk, color=col, mfc="none", ms=7,
                 label=f"{integ}: ρ = {th['maps'][integ]['spectral_radius']:.4g}")
     lim = max(1.2, 1.1 * max(m["spectral_radius"] for m in th["maps"].values()))
-    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="Re λ", ylabel="Im λ",
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=f"Re λ ({DIMLESS})",
+           ylabel=f"Im λ ({DIMLESS})",
            title=label(f"Φ at step {th['step']} of {run.name} (dt {th['dt']:g} s)"))
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(loc="lower left")
     _save(fig, path)
 
 
-def gamma_ramp(runs: list[RunData], path: Path) -> None:
-    """The γ ramp of the spec's conditioning knobs, with the logged (s_min_G, γ) of each run."""
-    fig, ax = plt.subplots(figsize=(6, 3.8))
+def gamma_ramp(runs: list[RunData], path: Path,
+               styles: dict[str, RunStyle] | None = None) -> None:
+    """The γ ramp of the spec's conditioning knobs with the logged (s_min_G, γ) of each run
+    (top); the runs' points lie on one curve and cover each other there, so below, one strip
+    per run shows where along σ_min(Γ) its steps were."""
+    styles = _styles(runs, styles)
+    n = len(runs)
+    fig, (ax, strips) = plt.subplots(2, 1, figsize=(9.5, 3.6 + 0.3 * n), sharex=True,
+                                     height_ratios=[3.2, 0.3 * n + 0.4], layout="constrained")
     knobs = None
-    for r in runs:
+    smax = 0.0
+    for i, r in enumerate(runs):
         c = _cols(r, ["s_min_G", "gamma"])
-        ax.plot(c["s_min_G"], c["gamma"], ".", ms=3, alpha=0.6, label=label(f"{r.name} (logged)"))
+        st = styles[r.name]
+        # Every 10th step: enough to show the cloud, few enough to leave the others visible.
+        ax.plot(c["s_min_G"][::10], c["gamma"][::10], st.marker, color=st.color, ms=4,
+                mfc="none", alpha=0.8, label=label(r.name))
+        strips.plot(c["s_min_G"][::10], np.full(c["s_min_G"][::10].size, i), "|",
+                    color=st.color, ms=8)
         knobs = knobs or r.conditioning
+        smax = max(smax, float(c["s_min_G"].max()))
     low, high, floor = knobs or (0.01, 0.05, 0.3)
-    smax = max([high * 2] + [float(_cols(r, ["s_min_G"])["s_min_G"].max()) * 1.1 for r in runs])
-    s = np.linspace(0, smax, 500)
-    ax.plot(s, [scale_by_svd(x, low, high, floor) for x in s], "k-", lw=1.2,
+    s = np.linspace(0, max(high * 2, 1.1 * smax), 500)
+    ax.plot(s, [scale_by_svd(x, low, high, floor) for x in s], "k-", lw=1.2, zorder=1,
             label=f"scale_by_svd (low {low:g}, high {high:g}, floor {floor:g})")
-    ax.set(title="γ ramp and the logged s_min_G", xlabel="σ_min(Γ)", ylabel="γ",
+    ax.set(title="γ ramp and the logged s_min_G (every 10th step)", ylabel=f"γ ({DIMLESS})",
            ylim=(0, 1.08))
-    ax.legend(fontsize=7, loc="lower right")
+    _legend_right(ax)
+    strips.set_yticks(range(n), [label(r.name) for r in runs], fontsize=8)
+    strips.set(ylim=(n - 0.5, -0.5), xlabel="σ_min(Γ) (SI mixed)", ylabel="run")
+    for ax_ in (ax, strips):
+        for x in (low, high):
+            ax_.axvline(x, color="0.5", lw=0.6, ls=":")
     _save(fig, path)
 
 
-def conditioning(runs: list[RunData], path: Path) -> None:
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
-    for r in runs:
+def conditioning(runs: list[RunData], path: Path,
+                 styles: dict[str, RunStyle] | None = None) -> None:
+    """σ_min(Γ), σ_min(J⊕) and κ(Γ) per step, one panel each, one legend for all."""
+    styles = _styles(runs, styles)
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    n = len(runs)
+    for j, r in enumerate(runs):
         c = _cols(r, ["t", "s_min_G", "s_min_J", "kappa_G"])
-        a1.plot(c["t"], c["s_min_G"], lw=0.9, label=label(f"{r.name}: σ_min(Γ)"))
-        a1.plot(c["t"], c["s_min_J"], lw=0.7, ls="--", label=label(f"{r.name}: σ_min(J⊕)"))
-        a2.semilogy(c["t"], c["kappa_G"], lw=0.9, label=label(r.name))
-    a1.set(title="conditioning over the mission", ylabel="σ_min")
-    a2.set(xlabel="t (s)", ylabel="κ(Γ)")
-    a1.legend(fontsize=6, ncols=2)
-    a2.legend(fontsize=7)
+        kw = _line_kw(styles[r.name], j, n, len(c["t"]))
+        axes[0].plot(c["t"], c["s_min_G"], label=label(r.name), **kw)
+        axes[1].plot(c["t"], c["s_min_J"], **kw)
+        axes[2].semilogy(c["t"], c["kappa_G"], **kw)
+    axes[0].set(title="conditioning over the mission", ylabel="σ_min(Γ) (SI mixed)")
+    axes[1].set(ylabel="σ_min(J⊕) (SI mixed)")
+    axes[2].set(ylabel=f"κ(Γ) ({DIMLESS})")
+    for ax in axes:
+        ax.set_xlabel("t (s)")
     fig.tight_layout()
+    _legend_right(axes[0])
     _save(fig, path)
 
 
-def dt_mu(runs: list[RunData], path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(8, 3.4))
-    for r in runs:
+def dt_mu(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = None) -> None:
+    """The online guard's dt·μ_max per step; runs of one robot and dt coincide, so each is
+    drawn in its own line style and width with staggered markers."""
+    styles = _styles(runs, styles)
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    n = len(runs)
+    for j, r in enumerate(runs):
         c = _cols(r, ["t", "dt_mu_max"])
-        ax.plot(c["t"], c["dt_mu_max"], lw=0.9,
-                label=label(f"{r.name} ({r.record.get('integrator', '?')})"))
-    ax.axhline(2.0, color="r", lw=1.2, ls="--", label="2: forward-Euler bound")
-    ax.set(title="dt·μ_max over the mission", xlabel="t (s)", ylabel="dt·μ_max", ylim=(0, None))
-    ax.legend(fontsize=7)
+        ax.plot(c["t"], c["dt_mu_max"],
+                label=label(f"{r.name} ({r.record.get('integrator', '?')})"),
+                **_line_kw(styles[r.name], j, n, len(c["t"])))
+    ax.axhline(2.0, color="k", lw=1.0, ls="--", label="2: forward-Euler bound")
+    ax.set(title="dt·μ_max over the mission", xlabel="t (s)",
+           ylabel=f"dt·μ_max ({DIMLESS})", ylim=(0, None))
+    _legend_right(ax)
     _save(fig, path)
 
 
@@ -211,7 +341,8 @@ def sweep_map(table: Path, path: Path) -> str | None:
         return f"{table}: no complete point"
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
     unstable = df["dt_mu_max"] > 2
-    for ax, col, ttl in ((a1, lag, "dominant lag-1"), (a2, "dt_mu_max", "dt·μ_max")):
+    for ax, col, ttl, ylab in ((a1, lag, "dominant lag-1", f"lag-1 r₁ ({DIMLESS})"),
+                               (a2, "dt_mu_max", "dt·μ_max", f"dt·μ_max ({DIMLESS})")):
         ax.plot(df["mission.dt"], df[col], "-", color="0.6", lw=0.8)
         ax.plot(df["mission.dt"][~unstable], df[col][~unstable], "o", color="tab:green",
                 label="dt·μ_max < 2")
@@ -220,9 +351,10 @@ def sweep_map(table: Path, path: Path) -> str | None:
         if "dt_star_damping" in df and df["dt_star_damping"].notna().any():
             ax.axvline(float(df["dt_star_damping"].median()), color="k", ls="--", lw=0.8,
                        label=f"dt*_damping = {float(df['dt_star_damping'].median()):.4g} s")
-        ax.set(title=ttl, xlabel="mission.dt (s)")
+        ax.set(title=ttl, xlabel="mission.dt (s)", ylabel=ylab)
+        ax.xaxis.set_major_locator(MaxNLocator(6))  # dt ticks of 4 digits collide otherwise
     a2.axhline(2.0, color="r", lw=0.8)
-    a1.legend(fontsize=7)
+    a1.legend()
     fig.suptitle(label(f"dt sweep {table.parent.name}"))
     fig.tight_layout()
     _save(fig, path)
@@ -256,8 +388,9 @@ def inertia_map(table: Path, path: Path) -> str | None:
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
     ring = df["bus_rate_lag1"] < 0
     for ax, col, ttl, ylab in (
-            (a1, "bus_rate_lag1", "lag-1 of ω_b's dominant step component", "r₁"),
-            (a2, "bus_rate_alternating_rms", "ω_b period-2 amplitude", "rad/s")):
+            (a1, "bus_rate_lag1", "lag-1 of ω_b's dominant step component",
+             f"lag-1 r₁ ({DIMLESS})"),
+            (a2, "bus_rate_alternating_rms", "ω_b period-2 amplitude", "RMS (rad/s)")):
         ax.plot(df["I_zz_bus"], df[col], "-", color="0.6", lw=0.8)
         ax.plot(df["I_zz_bus"][ring], df[col][ring], "s", color="tab:red", label="r₁ < 0")
         ax.plot(df["I_zz_bus"][~ring], df[col][~ring], "o", color="tab:green", label="r₁ ≥ 0")
@@ -267,7 +400,7 @@ def inertia_map(table: Path, path: Path) -> str | None:
         ax.set(title=ttl, xlabel="I_zz,bus (kg·m²)", ylabel=ylab)
     a2.set_yscale("log")
     a1.set_ylim(-1.05, 1.05)
-    a1.legend(fontsize=7, loc="center right")
+    a1.legend(loc="center right")
     fig.suptitle(label(f"bus-inertia sweep {table.parent.name}"))
     fig.tight_layout()
     _save(fig, path)

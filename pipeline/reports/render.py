@@ -73,6 +73,8 @@ def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], li
     runs = [r for r in runs if r not in diverged]
     logged = [r for r in runs if r.log is not None]
     analysed = [r for r in runs if "directions" in r.record]
+    # One palette for the whole report: a run is drawn alike in every figure.
+    styles = fg.palette([r.name for r in [*runs, *diverged]])
     if len(logged) < len(runs):
         skipped.append("time-series figures leave out runs whose log is missing: "
                        + ", ".join(r.name for r in runs if r.log is None))
@@ -81,21 +83,21 @@ def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], li
                    "‖ω_b‖ over the mission (top), the bus yaw rate v̆[2] and the camera roll "
                    "rate v̆[8] over the last second, per run: on the seed robot the period-2 "
                    "ripple is in ω_b (the bus yaw), on the servicer in the camera roll."),
-         lambda p: fg.rates(logged, p), logged),
+         lambda p: fg.rates(logged, p, styles), logged),
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
-                   "period-2 reads −1, smooth +1."), lambda p: fg.lag1_directions(analysed, p),
-         analysed),
+                   "period-2 reads −1, smooth +1."),
+         lambda p: fg.lag1_directions(analysed, p, styles), analysed),
         (fg.Figure("figures/gamma_ramp.png", "γ ramp with the logged s_min_G",
                    "scale_by_svd with the spec's controller.base.conditioning knobs and the "
-                   "logged (s_min_G, γ) of each step."), lambda p: fg.gamma_ramp(logged, p),
+                   "logged (s_min_G, γ) of each step."), lambda p: fg.gamma_ramp(logged, p, styles),
          logged),
         (fg.Figure("figures/conditioning.png", "Conditioning over the mission",
                    "σ_min of Γ and J⊕ and κ(Γ) per step, as logged."),
-         lambda p: fg.conditioning(logged, p), logged),
+         lambda p: fg.conditioning(logged, p, styles), logged),
         (fg.Figure("figures/dt_mu.png", "dt·μ_max over the mission",
                    "The online guard's dt·μ_max per step, with the forward-Euler bound 2."),
-         lambda p: fg.dt_mu(logged, p), logged),
+         lambda p: fg.dt_mu(logged, p, styles), logged),
     ]
     for fig, draw, inputs in global_figs:
         if inputs:
@@ -128,6 +130,27 @@ def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], li
                         "red squares are points above the bound 2, the dashed line dt*.")
         _figure(out, made, skipped, fig, lambda p, t=table: fg.sweep_map(t, p))
     return made, skipped
+
+
+def sweep_files(out: Path) -> list[dict]:
+    """Every file of every sweep folder, for the index: the table (``sweep.parquet``, with its
+    point count and swept key read from it) and any page beside it."""
+    import pyarrow.parquet as pq
+
+    rows = []
+    for folder in sorted(p for p in (out / "sweeps").glob("*") if p.is_dir()):
+        for f in sorted(folder.iterdir()):
+            if not f.is_file() or f.name.startswith("."):
+                continue
+            what = ""
+            if f.suffix == ".parquet":
+                try:
+                    what = (f"sweep table, {pq.read_metadata(f).num_rows} points over "
+                            f"{fg.sweep_key(f) or 'unknown key'}")
+                except (OSError, ValueError):
+                    what = "sweep table (unreadable)"
+            rows.append({"file": f.relative_to(out).as_posix(), "what": what})
+    return rows
 
 
 def _existing(out: Path, *names: str) -> list[str]:
@@ -204,9 +227,10 @@ def render_all(out: Path, force: bool = False) -> list[Path]:
         mechanisms.append({"run": r, "verdict": ctx["verdict"], "against": ctx["names"][1],
                            "eig": f"figures/eig_{r.folder}.png" in fig_files})
     _remove_stale(out, {*written, *(out / f.file for f in figs)})
-    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "baselines.md", "baselines.json",
-                      "bench.md", "bench.json", "ci/CLAIMS.html", "ci/CLAIMS.md")
-    sweeps = sorted(p.relative_to(out).as_posix() for p in out.glob("sweeps/*/*.md"))
+    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "claims.json", "baselines.md",
+                      "baselines.json", "bench.md", "bench.json", "ci/CLAIMS.html",
+                      "ci/CLAIMS.md", "ci/claims.json")
+    sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    pages=pages, sweeps=sweeps, code_version=report_version())
