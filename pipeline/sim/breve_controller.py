@@ -61,15 +61,16 @@ def feedforward_term(M_breve: np.ndarray, v_breve_dot_des: np.ndarray, C_breve: 
 
 
 @jit
-def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_des, v_breve_dot_des, J_x,
-              K_breve, x_tilde, D_breve, G_vc, com_vel_err, k_posture, q_joint, q_bar):
-    """RHS of eq. 13: the sum of its named terms."""
+def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_dot_des, err, K_breve,
+              D_breve, k_posture, q_joint, q_bar):
+    """RHS of eq. 13: the sum of its named terms, with the task errors ``err`` (``TaskErrors``,
+    eq. 14)."""
     return (coriolis_term(C_breve, v_breve)
-            + damping_term(D_breve, v_breve, v_breve_des)
-            + stiffness_term(J_x, K_breve, x_tilde)
-            + com_coupling_term(C_c, D_breve, G_vc, com_vel_err)
+            + damping_term(D_breve, v_breve, err.v_breve_des)
+            + stiffness_term(err.J_x, K_breve, err.x_tilde)
+            + com_coupling_term(C_c, D_breve, err.G_vc, err.com_vel_err)
             + posture_term(gamma_inv, k_posture, q_joint, q_bar)
-            + feedforward_term(M_breve, v_breve_dot_des, C_breve, v_breve_des))
+            + feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
 
 
 @jit
