@@ -1,4 +1,4 @@
-"""The compiled step's flat layouts, checked field by field against independent computations,
+"""The compiled step's flat layouts, read by name and sensitive to every swap of two fields,
 the analysis' LAPACK SVDs against NumPy's, and the kernel cache's source key."""
 
 from __future__ import annotations
@@ -8,20 +8,22 @@ import shutil
 
 import numpy as np
 import pytest
-import scipy.linalg
 
 from pipeline.sim import jit as jit_mod
-from pipeline.sim.base_controller import block_gains, conditioning_scale
-from pipeline.sim.base_guidance import REFERENCE_FIELDS, unpack_reference
+from pipeline.sim.base_guidance import REFERENCE_FIELDS, read_reference
 from pipeline.sim.control_step import (
     CONTROLLER_FIELDS,
+    ROW,
     ROW_FIELDS,
+    ROW_SIZE,
     STATE_FIELDS,
-    pack,
-    unpack_controller,
+    controller_step,
+    read_params,
 )
-from pipeline.sim.mission import Mission, task_errors
+from pipeline.sim.layout import offsets, pack, unpack
+from pipeline.sim.mission import Mission
 from pipeline.sim.svd import batched_singular_values, svd_right
+from pipeline.sim.target import CoverageCounter
 from pipeline.spec import load_spec, with_overrides
 
 
@@ -50,16 +52,18 @@ def test_pack_rejects_unknown_fields_and_wrong_sizes():
         pack(STATE_FIELDS, {"q": np.zeros(3)})
 
 
-def test_unpack_controller_reads_each_named_field():
-    """Distinct values everywhere (flags true): the kernel's reader, flattened in order, gives
-    back the vector, so a shifted or overlapping offset shows."""
-    flags = ("derate_gain", "imex")
-    values = {name: 1.0 if name in flags else np.arange(n) + 0.25 + 100 * i
-              for i, (name, n) in enumerate(CONTROLLER_FIELDS)}
-    vec = pack(CONTROLLER_FIELDS, values)
-    got = np.concatenate([np.ravel(np.asarray(g, dtype=float))
-                          for g in unpack_controller(vec)])
-    np.testing.assert_array_equal(got, vec)
+def test_read_params_reads_each_named_field():
+    """Distinct values everywhere (one flag set, one clear): the kernel's reader gives each
+    field back under its own name."""
+    values = {name: np.arange(n) + 0.25 + 100 * i for i, (name, n) in enumerate(CONTROLLER_FIELDS)}
+    values |= {"derate_gain": 1.0, "imex": 0.0}
+    got = read_params(pack(CONTROLLER_FIELDS, values))
+    assert got._fields == tuple(name for name, _ in CONTROLLER_FIELDS)
+    for name, want in values.items():
+        if name in ("derate_gain", "imex"):
+            assert getattr(got, name) is (want > 0.5), name
+        else:
+            np.testing.assert_array_equal(np.ravel(getattr(got, name)), want, err_msg=name)
 
 
 def test_reference_vector_round_trip(mission):
@@ -67,48 +71,131 @@ def test_reference_vector_round_trip(mission):
     vec = np.zeros(sum(n for _, n in REFERENCE_FIELDS))
     mission.guidance.reference_into(vec, 3.7, np.array([1.0, -2.0, 0.5]))
     np.testing.assert_array_equal(vec, ref.as_vector())
-    for (name, _), part in zip(REFERENCE_FIELDS, unpack_reference(vec), strict=True):
-        np.testing.assert_array_equal(part, getattr(ref, name), err_msg=name)
+    back = read_reference(vec)
+    for name, _ in REFERENCE_FIELDS:
+        np.testing.assert_array_equal(getattr(back, name), getattr(ref, name), err_msg=name)
 
 
-def test_step_row_fields_against_independent_computations(mission):
-    """Row k written by the kernel, field by field, against NumPy/SciPy from the same state."""
+# -- a swapped field changes the step --------------------------------------------------------
+#
+# The kernel reads and writes its flat vectors through places frozen from the layouts. Below,
+# one step is taken with every input field set to a distinct value, then again with the inputs
+# packed (or the row read) under a layout in which two fields trade places: what a kernel that
+# confused the two would see. For every pair of every layout the step's result must change, so
+# the field-by-field checks of test_log_row.py would catch such a confusion.
+
+FLAG_BOUNDS = {  # the controller field bounding each limit flag, and the block it bounds
+    "sat_omega_b_acc": ("acc_bounds", 0), "sat_omega_b_rate": ("rate_bounds", 0),
+    "sat_nu_e_lin_acc": ("acc_bounds", 1), "sat_nu_e_lin_rate": ("rate_bounds", 1),
+    "sat_nu_e_ang_acc": ("acc_bounds", 2), "sat_nu_e_ang_rate": ("rate_bounds", 2),
+    "sat_v_c_acc": ("v_c_acc", 0), "sat_v_c_rate": ("v_c_rate", 0), "sat_v_max": ("v_max", 0)}
+
+
+def _swapped(fields, i, j):
+    f = list(fields)
+    f[i], f[j] = f[j], f[i]
+    return tuple(f)
+
+
+@pytest.fixture(scope="module")
+def distinct_step(mission):
+    """(mission, q, v, named controller, state and reference values), all distinct: a real
+    mid-mission state of the seed robot, limits that bind, γ on its ramp, the damped inverse
+    damping, a CoM integral to bound; the ``dq`` slot holds values the kernel overwrites."""
     s = mission.initial_state()
-    for _ in range(25):  # past the start, with a v̆_des history
+    for _ in range(20):
         s, _ = mission.step(s)
-    nxt, row = mission.step(s)
-    spec, dt = mission.spec, mission.dt
-    for name in ("q", "v", "v_c", "v_breve"):
-        np.testing.assert_array_equal(row[name], getattr(s, name), err_msg=name)
-    assert row["tau"] == s.tau
     T = mission.robot.terms(s.q, s.v)
-    sg = np.linalg.svd(T.gamma, compute_uv=False)
-    sj = np.linalg.svd(T.J_oplus, compute_uv=False)
-    assert row["s_min_G"] == pytest.approx(sg[-1], rel=1e-12)
-    assert row["kappa_G"] == pytest.approx(sg[0] / sg[-1], rel=1e-12)
-    assert row["s_min_J"] == pytest.approx(sj[-1], rel=1e-12)
-    assert row["kappa_J"] == pytest.approx(sj[0] / sj[-1], rel=1e-12)
-    gamma = conditioning_scale(T.s_min_G, spec.controller)
-    assert row["gamma"] == gamma
-    _, D = block_gains(spec.controller, gamma)
-    mu = scipy.linalg.eigvals(D, T.reduced_inertia).real  # D̆ x = μ M̆ x: μ = eig(M̆⁻¹D̆)
-    assert row["dt_mu_max"] == pytest.approx(dt * mu.max(), rel=1e-9)
+    ctrl = unpack(CONTROLLER_FIELDS, mission.controller_vector())
+    ctrl |= {"k": ctrl["k"] * (1 + 0.01 * np.arange(9)),
+             "d": ctrl["d"] * (1 + 0.013 * np.arange(9)),
+             "derate_gain": 1.0, "imex": 0.0, "k_posture": 0.37,
+             "acc_bounds": [0.031, 0.052, 0.073], "rate_bounds": [0.0041, 0.0062, 0.0083],
+             "com_K": 0.21, "com_D": 0.43, "com_Ki": 0.057, "com_i_max": 1.1e-5,
+             "v_c_acc": 7.1e-4, "v_c_rate": 0.0123, "v_max": 0.0131,
+             "ramp_low": 0.5 * T.s_min_G, "ramp_high": 2.1 * T.s_min_G, "ramp_floor": 0.29,
+             "inverse_floor": 1.7 * T.s_min_J, "inverse_damping": 0.047}
+    state = {"q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve, "tau": s.tau,
+             "integral": [2.3e-4, -3.1e-4, 1.7e-4], "v_breve_des_prev": s.v_breve_des_prev,
+             "has_prev": 1.0, "dq": 1000.0 + np.arange(12)}
     ref = mission.guidance.reference(s.tau, T.p_b)
-    err = task_errors(T, ref, gamma, s.v_c)
-    np.testing.assert_allclose(row["x_tilde"], err.x_tilde, rtol=0, atol=1e-14)
-    np.testing.assert_allclose(row["v_breve_des"], err.v_breve_des, rtol=0, atol=1e-14)
-    assert row["com_err"] == pytest.approx(np.linalg.norm(err.com_pos_err), rel=1e-12)
+    ref = {name: getattr(ref, name) for name, _ in REFERENCE_FIELDS}
+    for named in (ctrl, state, ref):  # swaps are within one layout
+        scalars = [float(np.ravel(x)[0]) for x in named.values() if np.size(x) == 1]
+        assert len(set(scalars)) == len(scalars)
+    return mission, s.q, s.v, ctrl, state, ref
 
-    def angle(a, b):
-        return np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
 
-    assert row["pointing_err_deg"] == pytest.approx(angle(T.R_tb[:, 2], -T.p_b), abs=1e-9)
-    assert row["boresight_err_deg"] == pytest.approx(angle(T.R_te[:, 2], ref.aim - T.p_e),
-                                                     abs=1e-9)
-    assert 0.0 <= row["coverage"] <= 1.0
-    # The carried state: τ advances by γ dt and v̆_des becomes the previous one.
-    assert nxt.tau == s.tau + gamma * dt
-    np.testing.assert_array_equal(nxt.v_breve_des_prev, row["v_breve_des"])
+def _kernel_step(mission, q, v, ctrl, state, ref, layouts=None):
+    """One call of the step kernel with the named inputs packed under ``layouts`` (default: the
+    kernel's own); the row read under the kernel's layout and the state under ``layouts``."""
+    lay = {"ctrl": CONTROLLER_FIELDS, "state": STATE_FIELDS, "ref": REFERENCE_FIELDS,
+           **(layouts or {})}
+    vec = pack(lay["state"], state)
+    rows = np.zeros((1, ROW_SIZE))
+    cov = CoverageCounter.start(mission.target, mission.spec.camera)
+    try:
+        with np.errstate(all="ignore"):
+            controller_step(mission.robot.dynamics_inputs(q, v), pack(lay["ref"], ref),
+                            pack(lay["ctrl"], ctrl), vec, rows, 0, cov)
+    except (np.linalg.LinAlgError, ZeroDivisionError, ValueError) as exc:
+        return type(exc).__name__
+    return rows[0], unpack(lay["state"], vec)
+
+
+def _same(a, b, tol: float = 1e-8) -> bool:
+    """Two results alike: the same exception, or every field of the row and of the state
+    within ``tol`` of the largest entry (a change smaller than the tolerances of
+    test_log_row.py would go unnoticed there, so it counts as no change)."""
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
+    fields = [(a[0][sl], b[0][sl]) for sl in ROW.values()]
+    fields += [(a[1][k], b[1][k]) for k in a[1]]
+    return all(np.all(np.isfinite(y)) and np.max(np.abs(x - y)) <= tol * np.max(np.abs(x))
+               for x, y in fields)
+
+
+@pytest.mark.parametrize("layout", ["ctrl", "state", "ref"])
+def test_swapping_two_input_fields_changes_the_step(distinct_step, layout):
+    mission, q, v, ctrl, state, ref = distinct_step
+    fields = {"ctrl": CONTROLLER_FIELDS, "state": STATE_FIELDS, "ref": REFERENCE_FIELDS}[layout]
+    base = _kernel_step(mission, q, v, ctrl, state, ref)
+    assert not isinstance(base, str), base
+    assert np.all(np.isfinite(base[0])) and all(np.all(np.isfinite(x)) for x in base[1].values())
+    unchanged = [(fields[i][0], fields[j][0])
+                 for i in range(len(fields)) for j in range(i + 1, len(fields))
+                 if _same(base, _kernel_step(mission, q, v, ctrl, state, ref,
+                                             {layout: _swapped(fields, i, j)}))]
+    assert unchanged == []
+
+
+def test_swapping_two_row_fields_changes_the_log(distinct_step):
+    """The row's fields read under a layout with two fields swapped differ from those read
+    under the kernel's, in at least one of five steps: the distinct-valued step and four in
+    which the bounds are 0 or 10⁹ by the bits of each flag's number, so the nine flags' values
+    across the steps differ pairwise (and are checked: a bound of 0 binds, 10⁹ does not)."""
+    mission, q, v, ctrl, state, ref = distinct_step
+    rows = [_kernel_step(mission, q, v, ctrl, state, ref)[0]]
+    for bit in range(4):
+        c = {k: np.array(x, dtype=float) for k, x in ctrl.items()}
+        want = {}
+        for n, (flag, (field, block)) in enumerate(FLAG_BOUNDS.items(), start=1):
+            want[flag] = bool((n >> bit) & 1)
+            c[field].reshape(-1)[block] = 0.0 if want[flag] else 1e9
+        row = _kernel_step(mission, q, v, c, state, ref)[0]
+        got = {flag: bool(row[ROW[flag].start]) for flag in FLAG_BOUNDS}
+        assert got == want
+        rows.append(row)
+    assert set(FLAG_BOUNDS) == {name for name, _ in ROW_FIELDS if name.startswith("sat_")}
+    unchanged = []
+    for i in range(len(ROW_FIELDS)):
+        for j in range(i + 1, len(ROW_FIELDS)):
+            swapped = offsets(_swapped(ROW_FIELDS, i, j))
+            if all(np.max(np.abs(r[swapped[name]] - r[ROW[name]]))
+                   <= 1e-8 * np.max(np.abs(r[ROW[name]]))
+                   for r in rows for name, _ in ROW_FIELDS):
+                unchanged.append((ROW_FIELDS[i][0], ROW_FIELDS[j][0]))
+    assert unchanged == []
 
 
 def test_svd_right_against_numpy():

@@ -7,11 +7,12 @@ velocities below are d/dτ and the mission multiplies them by γ.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from pipeline.sim.jit import jit
+from pipeline.sim.layout import field_places, pack
 from pipeline.sim.rotations import look_at, vee
 from pipeline.spec import Guidance
 
@@ -21,11 +22,19 @@ _H = 1e-4  # s, central-difference step for the attitude references' rates
 REFERENCE_FIELDS = (("p_c", 3), ("v_c", 3), ("a_c", 3), ("R_b", 9), ("w_b", 3), ("p_e", 3),
                     ("v_e", 3), ("R_e", 9), ("w_e", 3), ("aim", 3))
 REFERENCE_SIZE = sum(n for _, n in REFERENCE_FIELDS)
+REFERENCE_AT = field_places("ReferencePlaces", REFERENCE_FIELDS)
+
+# The guidance's constants as one flat vector (see ``BaseGuidance``): the orbit's phase (rad),
+# radius (m) and rate ω (rad/s), the aim point's amplitude (m) and period (s), the
+# central-difference step h (s), the camera's CoM offset o_ce_b and its x-axis x_e_b (bus frame).
+GUIDANCE_FIELDS = (("phase", 1), ("radius", 1), ("omega", 1), ("aim_amplitude", 1),
+                   ("aim_period", 1), ("h", 1), ("o_ce_b", 3), ("x_e_b", 3))
+GUIDANCE_AT = field_places("GuidancePlaces", GUIDANCE_FIELDS)
 
 
-@dataclass(frozen=True)
-class Reference:
-    """Desired CoM, bus and camera motion at one guidance time (t frame, d/dτ rates)."""
+class Reference(NamedTuple):
+    """Desired CoM, bus and camera motion at one guidance time (t frame, d/dτ rates); the
+    fields of ``REFERENCE_FIELDS``, passed by name into and built inside compiled code."""
 
     p_c: np.ndarray
     v_c: np.ndarray
@@ -53,54 +62,66 @@ def orbit(tau, phase, radius, omega):
 
 
 @jit
-def poses(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude, aim_period, o_ce_b, x_e_b):
-    """Desired bus attitude, camera position and attitude, and the aim point at τ (eq. 17).
+def poses(tau, p_b, use_p_b, g):
+    """Desired bus attitude, camera position and attitude, and the aim point at τ (eq. 17),
+    with the guidance's constants ``g`` (``GUIDANCE_FIELDS``).
 
     The bus z-axis points at the target (from ``p_b`` if ``use_p_b``, else from the desired
     CoM) with x along the orbit; the camera keeps the CoM offset ``o_ce_b`` (bus frame) and
     aims at a point sweeping the target's z-axis, its x-axis near the bus-frame ``x_e_b``.
     """
-    p_c, v_c, _ = orbit(tau, phase, radius, omega)
+    p_c, v_c, _ = orbit(tau, g[GUIDANCE_AT.phase], g[GUIDANCE_AT.radius], g[GUIDANCE_AT.omega])
     R_b = look_at(-p_b if use_p_b else -p_c, v_c)
-    p_e = p_c + R_b @ o_ce_b
-    aim = np.array([0.0, 0.0, aim_amplitude * np.sin(2 * np.pi * tau / aim_period)])
-    R_e = look_at(aim - p_e, R_b @ x_e_b)
+    p_e = p_c + R_b @ g[GUIDANCE_AT.o_ce_b].copy()
+    aim = np.array([0.0, 0.0, g[GUIDANCE_AT.aim_amplitude]
+                    * np.sin(2 * np.pi * tau / g[GUIDANCE_AT.aim_period])])
+    R_e = look_at(aim - p_e, R_b @ g[GUIDANCE_AT.x_e_b].copy())
     return R_b, p_e, R_e, aim
 
 
 @jit
-def references(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude, aim_period, o_ce_b,
-               x_e_b, h):
-    """All references at τ (eq. 17): the poses at τ and, by central differences of the
-    orbit-based poses at τ ± h, the camera velocity and the attitude rates ω = vee(Ṙ Rᵀ)."""
-    p_c, v_c, a_c = orbit(tau, phase, radius, omega)
-    R_b, p_e, R_e, aim = poses(tau, p_b, use_p_b, phase, radius, omega, aim_amplitude,
-                               aim_period, o_ce_b, x_e_b)
-    R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, False, phase, radius, omega, aim_amplitude,
-                                aim_period, o_ce_b, x_e_b)
-    R_bm, p_em, R_em, _ = poses(tau - h, p_b, False, phase, radius, omega, aim_amplitude,
-                                aim_period, o_ce_b, x_e_b)
+def references(tau, p_b, use_p_b, g):
+    """All references at τ (eq. 17) as a ``Reference``, with the guidance's constants ``g``
+    (``GUIDANCE_FIELDS``): the poses at τ and, by central differences of the orbit-based poses
+    at τ ± h, the camera velocity and the attitude rates ω = vee(Ṙ Rᵀ)."""
+    h = g[GUIDANCE_AT.h]
+    p_c, v_c, a_c = orbit(tau, g[GUIDANCE_AT.phase], g[GUIDANCE_AT.radius],
+                          g[GUIDANCE_AT.omega])
+    R_b, p_e, R_e, aim = poses(tau, p_b, use_p_b, g)
+    R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, False, g)
+    R_bm, p_em, R_em, _ = poses(tau - h, p_b, False, g)
     w_b = vee((R_bp - R_bm) / (2 * h) @ np.ascontiguousarray(R_b.T))
     w_e = vee((R_ep - R_em) / (2 * h) @ np.ascontiguousarray(R_e.T))
-    return p_c, v_c, a_c, R_b, w_b, p_e, (p_ep - p_em) / (2 * h), R_e, w_e, aim
+    return Reference(p_c=p_c, v_c=v_c, a_c=a_c, R_b=R_b, w_b=w_b, p_e=p_e,
+                     v_e=(p_ep - p_em) / (2 * h), R_e=R_e, w_e=w_e, aim=aim)
 
 
 @jit
-def reference_vector(out, tau, p_b, use_p_b, params):
-    """:func:`references` written into ``out`` in the order of ``REFERENCE_FIELDS``;
-    ``params`` = [phase, radius, ω, aim amplitude, aim period, h, o_ce_b (3), x_e_b (3)]."""
-    p_c, v_c, a_c, R_b, w_b, p_e, v_e, R_e, w_e, aim = references(
-        tau, p_b, use_p_b, params[0], params[1], params[2], params[3], params[4],
-        params[6:9].copy(), params[9:12].copy(), params[5])
-    out[:] = np.concatenate((p_c, v_c, a_c, R_b.ravel(), w_b, p_e, v_e, R_e.ravel(), w_e, aim))
+def reference_vector(out, tau, p_b, use_p_b, g):
+    """:func:`references` written into ``out`` by name (``REFERENCE_FIELDS``)."""
+    r = references(tau, p_b, use_p_b, g)
+    out[REFERENCE_AT.p_c] = r.p_c
+    out[REFERENCE_AT.v_c] = r.v_c
+    out[REFERENCE_AT.a_c] = r.a_c
+    out[REFERENCE_AT.R_b] = r.R_b.ravel()
+    out[REFERENCE_AT.w_b] = r.w_b
+    out[REFERENCE_AT.p_e] = r.p_e
+    out[REFERENCE_AT.v_e] = r.v_e
+    out[REFERENCE_AT.R_e] = r.R_e.ravel()
+    out[REFERENCE_AT.w_e] = r.w_e
+    out[REFERENCE_AT.aim] = r.aim
 
 
 @jit
-def unpack_reference(r):
-    """The fields of a reference vector (``REFERENCE_FIELDS``), as contiguous arrays."""
-    return (r[0:3].copy(), r[3:6].copy(), r[6:9].copy(), r[9:18].copy().reshape((3, 3)),
-            r[18:21].copy(), r[21:24].copy(), r[24:27].copy(), r[27:36].copy().reshape((3, 3)),
-            r[36:39].copy(), r[39:42].copy())
+def read_reference(r):
+    """A reference vector (``REFERENCE_FIELDS``) as a ``Reference`` of contiguous copies."""
+    return Reference(p_c=r[REFERENCE_AT.p_c].copy(), v_c=r[REFERENCE_AT.v_c].copy(),
+                     a_c=r[REFERENCE_AT.a_c].copy(),
+                     R_b=r[REFERENCE_AT.R_b].copy().reshape((3, 3)),
+                     w_b=r[REFERENCE_AT.w_b].copy(), p_e=r[REFERENCE_AT.p_e].copy(),
+                     v_e=r[REFERENCE_AT.v_e].copy(),
+                     R_e=r[REFERENCE_AT.R_e].copy().reshape((3, 3)),
+                     w_e=r[REFERENCE_AT.w_e].copy(), aim=r[REFERENCE_AT.aim].copy())
 
 
 class BaseGuidance:
@@ -113,19 +134,18 @@ class BaseGuidance:
         self.omega = 2 * np.pi / cfg.orbit_period
         self.phase = float(np.deg2rad(cfg.orbit_phase_deg))
         self._zero3 = np.zeros(3)
-        self._params = np.array([self.phase, cfg.orbit_radius, self.omega, cfg.aim_amplitude,
-                                 cfg.aim_period, _H, *self.o_ce_b, *self.x_e_b])
+        self._params = pack(GUIDANCE_FIELDS, {
+            "phase": self.phase, "radius": cfg.orbit_radius, "omega": self.omega,
+            "aim_amplitude": cfg.aim_amplitude, "aim_period": cfg.aim_period, "h": _H,
+            "o_ce_b": self.o_ce_b, "x_e_b": self.x_e_b})
 
     def reference(self, tau: float, p_b: np.ndarray | None = None) -> Reference:
         """References at τ. With the bus position ``p_b`` the desired bus z-axis points from
         the actual bus at the target (so orbit-tracking error does not become pointing error);
         without it, from the desired CoM. Rates are those of the orbit-based references.
         """
-        c = self.cfg
-        return Reference(*references(
-            tau, self._zero3 if p_b is None else p_b, p_b is not None, self.phase,
-            c.orbit_radius, self.omega, c.aim_amplitude, c.aim_period, self.o_ce_b, self.x_e_b,
-            _H))
+        return references(tau, self._zero3 if p_b is None else p_b, p_b is not None,
+                          self._params)
 
     def reference_into(self, out: np.ndarray, tau: float, p_b: np.ndarray) -> None:
         """:meth:`reference` at (τ, p_b) as one vector (``REFERENCE_FIELDS``), into ``out``:

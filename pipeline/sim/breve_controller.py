@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.jit import jit
-from pipeline.sim.limits import BREVE_BLOCKS, breve_bounds, saturate_blocks
-from pipeline.spec import Limits
+from pipeline.sim.limits import saturate_blocks
 
 
 @jit
@@ -62,15 +61,16 @@ def feedforward_term(M_breve: np.ndarray, v_breve_dot_des: np.ndarray, C_breve: 
 
 
 @jit
-def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_des, v_breve_dot_des, J_x,
-              K_breve, x_tilde, D_breve, G_vc, com_vel_err, k_posture, q_joint, q_bar):
-    """RHS of eq. 13: the sum of its named terms."""
+def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_dot_des, err, K_breve,
+              D_breve, k_posture, q_joint, q_bar):
+    """RHS of eq. 13: the sum of its named terms, with the task errors ``err`` (``TaskErrors``,
+    eq. 14)."""
     return (coriolis_term(C_breve, v_breve)
-            + damping_term(D_breve, v_breve, v_breve_des)
-            + stiffness_term(J_x, K_breve, x_tilde)
-            + com_coupling_term(C_c, D_breve, G_vc, com_vel_err)
+            + damping_term(D_breve, v_breve, err.v_breve_des)
+            + stiffness_term(err.J_x, K_breve, err.x_tilde)
+            + com_coupling_term(C_c, D_breve, err.G_vc, err.com_vel_err)
             + posture_term(gamma_inv, k_posture, q_joint, q_bar)
-            + feedforward_term(M_breve, v_breve_dot_des, C_breve, v_breve_des))
+            + feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
 
 
 @jit
@@ -95,31 +95,6 @@ def imex_update(M_breve, D_breve, rhs, v_breve, dt, acc_bounds, rate_bounds):
     acc, hit_acc = saturate_blocks((v_implicit - v_breve) / dt, acc_bounds)
     v_new, hit_rate = saturate_blocks(v_breve + dt * acc, rate_bounds)
     return v_new, hit_acc, hit_rate
-
-
-def _flags(hit_acc: np.ndarray, hit_rate: np.ndarray) -> dict[str, bool]:
-    return ({f"sat_{name}_acc": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit_acc,
-                                                               strict=True)}
-            | {f"sat_{name}_rate": bool(h) for (name, _), h in zip(BREVE_BLOCKS, hit_rate,
-                                                                  strict=True)})
-
-
-def explicit_step(M_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray, dt: float,
-                  lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
-    """Forward Euler (eq. 15a), with the spec's limits; the flags of the limits that bound."""
-    v_new, hit_acc, hit_rate = explicit_update(M_breve, rhs, v_breve, dt,
-                                               breve_bounds(lim, "acc"), breve_bounds(lim, "rate"))
-    return v_new, _flags(hit_acc, hit_rate)
-
-
-def imex_step(M_breve: np.ndarray, D_breve: np.ndarray, rhs: np.ndarray, v_breve: np.ndarray,
-              dt: float, lim: Limits) -> tuple[np.ndarray, dict[str, bool]]:
-    """Damping implicit (eq. 15b), with the spec's limits; the flags of the limits that bound."""
-    v_new, hit_acc, hit_rate = imex_update(M_breve, D_breve, rhs, v_breve, dt,
-                                           breve_bounds(lim, "acc"), breve_bounds(lim, "rate"))
-    return v_new, _flags(hit_acc, hit_rate)
-
-
 
 
 @jit

@@ -2,28 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from pipeline.sim.jit import jit
 from pipeline.sim.limits import saturate
-from pipeline.spec import ComGains, Limits
-
-
-@dataclass(frozen=True)
-class ComUpdate:
-    v_c: np.ndarray
-    integral: np.ndarray
-    sat_acc: bool
-    sat_rate: bool
-
-
-def com_step(x_c: np.ndarray, xd_c: np.ndarray, v_c: np.ndarray, a_ff: np.ndarray,
-             integral: np.ndarray, gains: ComGains, lim: Limits, dt: float) -> ComUpdate:
-    """The CoM loop's step (eq. 12) with the spec's gains and limits."""
-    return ComUpdate(*com_update(x_c, xd_c, v_c, a_ff, integral, gains.K, gains.D, gains.Ki,
-                                 gains.i_max, lim.v_c_acc, lim.v_c_rate, dt))
 
 
 @jit

@@ -45,10 +45,3 @@ def breve_bounds(lim: Limits, kind: str) -> np.ndarray:
     b = np.array([getattr(lim, f"{name}_{kind}") for name, _ in BREVE_BLOCKS])
     b.flags.writeable = False
     return b
-
-
-def saturate_breve(x: np.ndarray, lim: Limits, kind: str) -> tuple[np.ndarray, dict[str, bool]]:
-    """Block-wise saturation of a 9-vector of rates (``kind='rate'``) or accelerations."""
-    out, hit = saturate_blocks(x, breve_bounds(lim, kind))
-    return out, {f"sat_{name}_{kind}": bool(h)
-                 for (name, _), h in zip(BREVE_BLOCKS, hit, strict=True)}

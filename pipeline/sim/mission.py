@@ -34,10 +34,11 @@ from pipeline.sim.control_step import (
     ROW_SIZE,
     STATE,
     STATE_FIELDS,
+    TaskErrors,
     controller_step,
-    pack,
     task_error_terms,
 )
+from pipeline.sim.layout import pack
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
@@ -69,18 +70,6 @@ class LoopState:
     v_breve_des_prev: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class TaskErrors:
-    """x̃, J_x, v̆_des, G_vc and ẋ̃_c of one step (eq. 14)."""
-
-    x_tilde: np.ndarray
-    J_x: np.ndarray
-    v_breve_des: np.ndarray
-    G_vc: np.ndarray
-    com_vel_err: np.ndarray
-    com_pos_err: np.ndarray
-
-
 @dataclass
 class MissionResult:
     columns: dict[str, np.ndarray] | None  # None when the run wrote them to a sink
@@ -97,8 +86,7 @@ def task_errors(T: Terms, ref: Reference, gamma: float, v_c: np.ndarray) -> Task
     x̃ = [2ε_b; p_e − p_e,des; 2ε_e], J_x = blockdiag(E_b, R_te, E_e),
     v̆_des = [R_bt γω_b,des; R_et γ(ṗ_e,des − ṗ_c,des); R_et γω_e,des], G_vc = [0; R_et; 0].
     """
-    return TaskErrors(*task_error_terms(T.R_tb, T.R_te, T.p_e, T.p_c, ref.R_b, ref.R_e, ref.p_e,
-                                        ref.p_c, ref.w_b, ref.v_e, ref.v_c, ref.w_e, gamma, v_c))
+    return task_error_terms(T.R_tb, T.R_te, T.p_e, T.p_c, ref, gamma, v_c)
 
 
 class Mission:
@@ -158,8 +146,8 @@ class Mission:
             "acc_bounds": breve_bounds(lim, "acc"), "rate_bounds": breve_bounds(lim, "rate"),
             "com_K": com.K, "com_D": com.D, "com_Ki": com.Ki, "com_i_max": com.i_max,
             "v_c_acc": lim.v_c_acc, "v_c_rate": lim.v_c_rate, "v_max": lim.v_max,
-            "ramp": [ramp.low, ramp.high, ramp.floor], "mass": robot.mass,
-            "floor": robot.floor, "damping": robot.damping})
+            "ramp_low": ramp.low, "ramp_high": ramp.high, "ramp_floor": ramp.floor,
+            "mass": robot.mass, "inverse_floor": robot.floor, "inverse_damping": robot.damping})
 
     def _advance(self, k: int, state: np.ndarray, rows: np.ndarray, ctrl: np.ndarray,
                  coverage: CoverageCounter) -> bool:
@@ -168,10 +156,8 @@ class Mission:
         state is finite."""
         robot, ref = self.robot, self._reference
         inputs = robot.dynamics_inputs(state[_Q], state[_V])
-        self.guidance.reference_into(ref, float(state[_TAU]), inputs[1])
-        finite = controller_step(*inputs, ref, ctrl, state, rows, k, coverage.target.points,
-                                 coverage.target.normals, coverage.limits, coverage.seen,
-                                 coverage.count)
+        self.guidance.reference_into(ref, float(state[_TAU]), inputs.p_b)
+        finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage)
         q_new = pin.integrate(robot.model, state[_Q], state[_DQ])
         state[_Q] = q_new
         # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
@@ -188,7 +174,7 @@ class Mission:
                                  else s.v_breve_des_prev)})
         rows = np.zeros((1, ROW_SIZE))
         self._advance(0, state, rows, self.controller_vector(),
-                      CoverageCounter(self.target, self.spec.camera))
+                      CoverageCounter.start(self.target, self.spec.camera))
         f = {name: state[sl].copy() for name, sl in STATE.items()}
         nxt = LoopState(q=f["q"], v=f["v"], v_c=f["v_c"], v_breve=f["v_breve"],
                         tau=float(f["tau"][0]), integral=f["integral"],
@@ -227,7 +213,7 @@ class Mission:
         state = pack(STATE_FIELDS, {"q": s0.q, "v": s0.v, "v_c": s0.v_c,
                                     "v_breve": s0.v_breve, "integral": s0.integral})
         ctrl = self.controller_vector()
-        coverage = CoverageCounter(self.target, self.spec.camera)
+        coverage = CoverageCounter.start(self.target, self.spec.camera)
         explicit = self.spec.controller.integrator == "explicit"
         warned: list[str] = []
         # The guard (eq. 24): the map's critical step at the start, once per run (a bisection

@@ -148,8 +148,8 @@ class GiordanoRobot:
             tt.gamma_into(out, k, *self.kinematic_inputs(qk), self.mass)
         return out
 
-    def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pinocchio's outputs at (q, v) that eqs. 2–11 take, each routine run once:
+    def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tt.DynamicsInputs:
+        """Pinocchio's outputs at (q, v) that eqs. 2–11 take, each routine run once, by name
         (R_tb, p_b, R_te, p_e, J_e, J̇_e, M, C, A_g, Ȧ_g), camera Jacobians in the LOCAL frame.
 
         Some are views of Pinocchio's data, valid until its next call.
@@ -163,7 +163,8 @@ class GiordanoRobot:
         C = pin.computeCoriolisMatrix(model, data, q, v)
         pin.computeCentroidalMapTimeVariation(model, data, q, v)
         R_tb, p_b, R_te, p_e, Ag, dAg = self._views or self._data_views()
-        return R_tb, p_b, R_te, p_e, J_e, dJ_e, M, C, Ag, dAg
+        return tt.DynamicsInputs(R_tb=R_tb, p_b=p_b, R_te=R_te, p_e=p_e, J_e=J_e, dJ_e=dJ_e,
+                                 M=M, C=C, Ag=Ag, dAg=dAg)
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
         """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.
@@ -171,23 +172,24 @@ class GiordanoRobot:
         With ``dynamics=False`` only the kinematic terms (Γ, Γ⁻¹, conditioning) are computed
         and v is not used; the dynamic fields are zeros.
         """
-        if dynamics:
-            R_tb, p_b, R_te, p_e, J_e, dJ_e, M, C, Ag, dAg = self.dynamics_inputs(q, v)
-        else:
-            R_tb, p_b, R_te, p_e, J_e, M = self.kinematic_inputs(q)
-        # Copies: Pinocchio's arrays view its data, which the next call overwrites.
-        R_tb, p_b, R_te, p_e = R_tb.copy(), p_b.copy(), R_te.copy(), p_e.copy()
         m = self.mass
         if dynamics:
-            (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
-             gamma_dot, M_hat, C_hat, s_min_G, kappa_G) = tt.full_transform(
-                R_tb, p_b, R_te, p_e, J_e, M, m, self.floor, self.damping, v, dJ_e, Ag, dAg, C)
-        else:
-            (p_bc, p_c, _, _, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
-             gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,
-                                            self.damping)
-            gamma_dot = C = M_hat = C_hat = self._zero_12
-            s_min_G, kappa_G = sigma_min_and_cond(gamma)
+            d = self.dynamics_inputs(q, v)
+            # Copies: Pinocchio's arrays view its data, which the next call overwrites.
+            d = d._replace(R_tb=d.R_tb.copy(), p_b=d.p_b.copy(), R_te=d.R_te.copy(),
+                           p_e=d.p_e.copy())
+            t = tt.full_transform(d, m, self.floor, self.damping, v)
+            return Terms(d.R_tb, d.p_b, t.p_c, d.p_e, d.R_te, t.p_bc, t.J_bar_v, t.J_oplus,
+                         t.J_oplus_inv, t.G_wb, t.gamma, t.gamma_inv, t.gamma_dot, d.M, d.C,
+                         t.M_hat, t.C_hat, float(t.s_min_J), float(t.kappa_J),
+                         float(t.s_min_G), float(t.kappa_G))
+        R_tb, p_b, R_te, p_e, J_e, M = self.kinematic_inputs(q)
+        R_tb, p_b, R_te, p_e = R_tb.copy(), p_b.copy(), R_te.copy(), p_e.copy()
+        (p_bc, p_c, _, _, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
+         gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,
+                                        self.damping)
+        z = self._zero_12
+        s_min_G, kappa_G = sigma_min_and_cond(gamma)
         return Terms(R_tb, p_b, p_c, p_e, R_te, p_bc, J_bar_v, J_oplus, J_inv, G_wb, gamma,
-                     gamma_inv, gamma_dot, M, C, M_hat, C_hat, float(s_min_J), float(kappa_J),
+                     gamma_inv, z, M, z, z, z, float(s_min_J), float(kappa_J),
                      float(s_min_G), float(kappa_G))

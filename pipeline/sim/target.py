@@ -7,6 +7,7 @@ origin, sampled as surface points with outward normals (panels have two faces). 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -64,15 +65,25 @@ def camera_limits(cam: Camera) -> tuple[float, float, float, float]:
             np.cos(np.deg2rad(cam.max_angle_deg)))
 
 
-class CoverageCounter:
-    """The target points seen so far by a camera and their count (eq. 18), as the step kernel
-    updates them in place (:func:`mark_visible`)."""
+class CoverageCounter(NamedTuple):
+    """The target points seen so far by a camera and their count (eq. 18), with the camera's
+    bounds: the step kernel's coverage bundle, updated in place (:func:`mark_visible`)."""
 
-    def __init__(self, target: TargetGeometry, cam: Camera):
-        self.target = target
-        self.seen = np.zeros(len(target.points), dtype=bool)
-        self.count = np.zeros(1, dtype=np.int64)  # how many are seen; an array, updated in place
-        self.limits = np.array(camera_limits(cam))
+    points: np.ndarray  # N×3, t frame
+    normals: np.ndarray  # N×3, unit
+    tan_half_fov: float
+    d_min: float
+    d_max: float
+    cos_max: float
+    seen: np.ndarray  # N booleans
+    count: np.ndarray  # how many are seen; one integer in an array, updated in place
+
+    @classmethod
+    def start(cls, target: TargetGeometry, cam: Camera) -> CoverageCounter:
+        """Nothing seen yet."""
+        return cls(target.points, target.normals, *camera_limits(cam),
+                   seen=np.zeros(len(target.points), dtype=bool),
+                   count=np.zeros(1, dtype=np.int64))
 
 
 @jit

@@ -11,11 +11,48 @@ Jacobian J_e in the camera's LOCAL frame, R_xy rotates y-coordinates into x.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from pipeline.sim.jit import jit
 from pipeline.sim.rotations import skew
 from pipeline.sim.sampling import sigma_min_and_cond
+
+
+class DynamicsInputs(NamedTuple):
+    """Pinocchio's outputs at (q, v) that eqs. 2–11 take, by name (``dynamics_inputs``)."""
+
+    R_tb: np.ndarray  # bus attitude
+    p_b: np.ndarray  # bus origin, t frame
+    R_te: np.ndarray  # camera attitude
+    p_e: np.ndarray  # camera origin, t frame
+    J_e: np.ndarray  # 6×12 camera Jacobian, LOCAL
+    dJ_e: np.ndarray  # its time variation
+    M: np.ndarray  # CRBA mass matrix
+    C: np.ndarray  # Coriolis matrix
+    Ag: np.ndarray  # centroidal momentum map, t frame
+    dAg: np.ndarray  # its time variation
+
+
+class Transform(NamedTuple):
+    """What :func:`full_transform` computes for one state (eqs. 2–9, 19)."""
+
+    p_bc: np.ndarray
+    p_c: np.ndarray
+    J_bar_v: np.ndarray
+    J_oplus: np.ndarray
+    G_wb: np.ndarray
+    J_oplus_inv: np.ndarray
+    s_min_J: float
+    kappa_J: float
+    gamma: np.ndarray  # Γ
+    gamma_inv: np.ndarray
+    gamma_dot: np.ndarray
+    M_hat: np.ndarray
+    C_hat: np.ndarray
+    s_min_G: float
+    kappa_G: float
 
 
 @jit
@@ -161,13 +198,16 @@ def gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 
 @jit
-def full_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping, v, dJ_e, Ag, dAg, C):
-    """Eqs. 2–9 and 19 in one call: :func:`task_transform`, then Γ̇, M̂, Ĉ and Γ's (σ_min, κ)."""
+def full_transform(d, mass, floor, damping, v):
+    """Eqs. 2–9 and 19 in one call from Pinocchio's outputs ``d`` (``DynamicsInputs``) at
+    (q, v): :func:`task_transform`, then Γ̇, M̂, Ĉ and Γ's (σ_min, κ), as a ``Transform``."""
     (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
-     gamma_inv) = task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping)
-    gamma_dot = gamma_time_derivative(np.ascontiguousarray(R_tb), R_te, R_eb, p_bc, p_ec,
-                                      J_bar_v, J_e, v, dJ_e, Ag, dAg, mass)
-    M_hat, C_hat = transformed_dynamics(M, C, gamma_inv, gamma_dot)
+     gamma_inv) = task_transform(d.R_tb, d.p_b, d.R_te, d.p_e, d.J_e, d.M, mass, floor, damping)
+    gamma_dot = gamma_time_derivative(np.ascontiguousarray(d.R_tb), d.R_te, R_eb, p_bc, p_ec,
+                                      J_bar_v, d.J_e, v, d.dJ_e, d.Ag, d.dAg, mass)
+    M_hat, C_hat = transformed_dynamics(d.M, d.C, gamma_inv, gamma_dot)
     s_min_G, kappa_G = sigma_min_and_cond(gamma)
-    return (p_bc, p_c, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma, gamma_inv,
-            gamma_dot, M_hat, C_hat, s_min_G, kappa_G)
+    return Transform(p_bc=p_bc, p_c=p_c, J_bar_v=J_bar_v, J_oplus=J_oplus, G_wb=G_wb,
+                     J_oplus_inv=J_inv, s_min_J=s_min_J, kappa_J=kappa_J, gamma=gamma,
+                     gamma_inv=gamma_inv, gamma_dot=gamma_dot, M_hat=M_hat, C_hat=C_hat,
+                     s_min_G=s_min_G, kappa_G=kappa_G)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from pipeline.spec import Limits
 from pipeline.verify.checks_base import (
     Outcome,
     check,
@@ -19,8 +18,8 @@ from pipeline.verify.checks_base import (
 )
 from pipeline.verify.checks_base import spec as check_spec
 
-BIG = Limits(omega_b_rate=1e9, omega_b_acc=1e9, nu_e_lin_rate=1e9, nu_e_lin_acc=1e9,
-             nu_e_ang_rate=1e9, nu_e_ang_acc=1e9, v_c_rate=1e9, v_c_acc=1e9, v_max=1e9)
+# The acceleration and rate bounds of the three v̆ blocks, too large to bind.
+_NO_BOUNDS = (np.full(3, 1e9), np.full(3, 1e9))
 
 
 def _spd(g: np.random.Generator, n: int = 9) -> np.ndarray:
@@ -134,21 +133,24 @@ def _block_gains() -> Outcome:
 
 
 @check("12", "CoM step vs the PD + bounded integral + feed-forward law with both saturations",
-       "pipeline.sim.com_controller.com_step")
-def _com_step() -> Outcome:
-    from pipeline.sim.com_controller import com_step
+       "pipeline.sim.com_controller.com_update")
+def _com_update() -> Outcome:
+    from pipeline.sim.com_controller import com_update
 
     c, g, dt = check_spec().controller, rng(12), 0.03
     diffs = []
     for scale in (1e-3, 10.0):  # saturations inactive, then active
         x, xd, vc, a_ff, integ = (scale * g.standard_normal(3) for _ in range(5))
-        out = com_step(x, xd, vc, a_ff, integ, c.com, c.limits, dt)
+        v_c, integral, _, _ = com_update(
+            x_c=x, xd_c=xd, v_c=vc, a_ff=a_ff, integral=integ, K=c.com.K, D=c.com.D,
+            Ki=c.com.Ki, i_max=c.com.i_max, acc_bound=c.limits.v_c_acc,
+            rate_bound=c.limits.v_c_rate, dt=dt)
         i_ref = np.minimum(np.maximum(integ + dt * x, -c.com.i_max), c.com.i_max)
         acc = -c.com.K * x - c.com.D * xd - c.com.Ki * i_ref + a_ff
         acc = acc * min(1.0, c.limits.v_c_acc / np.sqrt(acc @ acc))
         v_new = vc + dt * acc
         v_new = v_new * min(1.0, c.limits.v_c_rate / np.sqrt(v_new @ v_new))
-        diffs += [maxdiff(out.v_c, v_new), maxdiff(out.integral, i_ref)]
+        diffs += [maxdiff(v_c, v_new), maxdiff(integral, i_ref)]
     return Outcome("random errors at scales 1e-3 and 10 (limits inactive, active), dt 0.03",
                    max(diffs), 1e-14)
 
@@ -178,32 +180,33 @@ def _attitude_error() -> Outcome:
 
 
 @check("15a", "explicit step vs v̆ + dt M̆⁻¹RHS (limits off) and the scalar closed form "
-       "v⁺ − v_des = (1 − dt d/m)(v − v_des)", "pipeline.sim.breve_controller.explicit_step")
+       "v⁺ − v_des = (1 − dt d/m)(v − v_des)", "pipeline.sim.breve_controller.explicit_update")
 def _explicit() -> Outcome:
-    from pipeline.sim.breve_controller import explicit_step
+    from pipeline.sim.breve_controller import explicit_update
 
     g, dt = rng(15), 0.03
     M, rhs, v = _spd(g), g.standard_normal(9), g.standard_normal(9)
-    d1 = maxdiff(explicit_step(M, rhs, v, dt, BIG)[0], v + dt * sla.inv(M) @ rhs)
+    d1 = maxdiff(explicit_update(M, rhs, v, dt, *_NO_BOUNDS)[0], v + dt * sla.inv(M) @ rhs)
     m, dd, vdes = 2.0, 150.0, g.standard_normal(9)
-    v1, _ = explicit_step(m * np.eye(9), -dd * (v - vdes), v, dt, BIG)
+    v1, _, _ = explicit_update(m * np.eye(9), -dd * (v - vdes), v, dt, *_NO_BOUNDS)
     d2 = maxdiff(v1 - vdes, (1 - dt * dd / m) * (v - vdes))
     return Outcome("random SPD M̆ and RHS; scalar mode m = 2, d = 150 (dt·d/m = 2.25), dt 0.03",
                    max(d1, d2), 1e-12, f"matrix {fmt(d1)}, scalar {fmt(d2)}")
 
 
 @check("15b", "imex step vs (M̆ + dt D̆)⁻¹(M̆v̆ + dt(RHS + D̆v̆)) and the scalar closed form "
-       "v⁺ − v_des = (v − v_des)/(1 + dt d/m)", "pipeline.sim.breve_controller.imex_step")
+       "v⁺ − v_des = (v − v_des)/(1 + dt d/m)", "pipeline.sim.breve_controller.imex_update")
 def _imex() -> Outcome:
-    from pipeline.sim.breve_controller import imex_step
+    from pipeline.sim.breve_controller import imex_update
 
     g, dt = rng(16), 0.03
     M, D = _spd(g), np.diag(g.uniform(1, 10, 9))
     rhs, v = g.standard_normal(9), g.standard_normal(9)
     ref = sla.inv(M + dt * D) @ (M @ v + dt * (rhs + D @ v))
-    d1 = maxdiff(imex_step(M, D, rhs, v, dt, BIG)[0], ref)
+    d1 = maxdiff(imex_update(M, D, rhs, v, dt, *_NO_BOUNDS)[0], ref)
     m, dd, vdes = 2.0, 150.0, g.standard_normal(9)
-    v1, _ = imex_step(m * np.eye(9), dd * np.eye(9), -dd * (v - vdes), v, dt, BIG)
+    v1, _, _ = imex_update(m * np.eye(9), dd * np.eye(9), -dd * (v - vdes), v, dt,
+                           *_NO_BOUNDS)
     d2 = maxdiff(v1 - vdes, (v - vdes) / (1 + dt * dd / m))
     return Outcome("random SPD M̆, diagonal D̆, RHS; scalar mode m = 2, d = 150, dt 0.03",
                    max(d1, d2), 1e-12, f"matrix {fmt(d1)}, scalar {fmt(d2)}")
@@ -212,18 +215,18 @@ def _imex() -> Outcome:
 @check("16", "sat(x, b) = x·min(1, b/‖x‖) per block, and its flags",
        "pipeline.sim.limits.saturate")
 def _saturate() -> Outcome:
-    from pipeline.sim.limits import saturate, saturate_breve
+    from pipeline.sim.limits import breve_bounds, saturate, saturate_blocks
 
     g, lim, diffs = rng(17), check_spec().controller.limits, []
     for scale in (0.01, 1.0, 100.0):
         x = scale * g.standard_normal(9)
         for kind in ("acc", "rate"):
-            out, flags = saturate_breve(x, lim, kind)
+            out, hit = saturate_blocks(x, breve_bounds(lim, kind))
             for j, name in enumerate(("omega_b", "nu_e_lin", "nu_e_ang")):
                 b, blk = getattr(lim, f"{name}_{kind}"), x[3 * j:3 * j + 3]
                 n = float(np.linalg.norm(blk))
                 diffs.append(maxdiff(out[3 * j:3 * j + 3], blk * min(1.0, b / n)))
-                if flags[f"sat_{name}_{kind}"] != (n > b):
+                if hit[j] != (n > b):
                     raise AssertionError(f"flag sat_{name}_{kind} wrong at scale {scale}")
         y = scale * g.standard_normal(3)
         diffs.append(maxdiff(saturate(y, 0.2)[0], y * min(1.0, 0.2 / np.linalg.norm(y))))
@@ -292,7 +295,7 @@ CHECKS = (
     _posture,
     _feedforward,
     _block_gains,
-    _com_step,
+    _com_update,
     _attitude_error,
     _explicit,
     _imex,

@@ -86,59 +86,13 @@ def _critical_step() -> Outcome:
                    dt_star, 1e-6, f"dt* = {dt_star:.6g} s, root {root:.6g} s (relative difference)")
 
 
-def _sat(x: np.ndarray, bound: float) -> np.ndarray:
-    n = float(np.linalg.norm(x))
-    return x * min(1.0, bound / n) if n > 0 else x
-
-
-def _sat_blocks(x: np.ndarray, lim, kind: str) -> np.ndarray:
-    names = ("omega_b", "nu_e_lin", "nu_e_ang")
-    return np.concatenate([_sat(x[3 * j:3 * j + 3], getattr(lim, f"{n}_{kind}"))
-                           for j, n in enumerate(names)])
-
-
-def _reassembled_step(mission, s) -> dict[str, np.ndarray]:
-    """One step re-assembled in NumPy from eqs. 12–16, in the order of eq. 22."""
-    import pinocchio as pin
-
-    from pipeline.sim.base_controller import block_gains, conditioning_scale
-    from pipeline.sim.mission import task_errors
-
-    sp, dt = mission.spec, mission.dt
-    c, lim = sp.controller, sp.controller.limits
-    T = mission.robot.terms(s.q, s.v)
-    gamma = conditioning_scale(T.s_min_G, c)
-    ref = mission.guidance.reference(s.tau, np.array(T.p_b))
-    err = task_errors(T, ref, gamma, s.v_c)
-    K, D = block_gains(c, gamma)
-    Mh, Ch, Gi = np.array(T.M_hat), np.array(T.C_hat), np.array(T.gamma_inv)
-    M, C, C_c = Mh[3:, 3:], Ch[3:, 3:], Ch[3:, :3]
-    vd = err.v_breve_des
-    vdd = np.zeros(9) if s.v_breve_des_prev is None else (vd - s.v_breve_des_prev) / dt
-    rhs = (-C @ s.v_breve - D @ (s.v_breve - vd) - err.J_x.T @ K @ err.x_tilde
-           - (C_c + D @ err.G_vc) @ err.com_vel_err
-           - Gi[6:, 3:].T @ (c.gains.posture * (s.q[7:] - mission.robot.q_bar))
-           + M @ vdd + C @ vd)
-    if c.integrator == "imex":
-        raw = np.linalg.solve(M + dt * D, M @ s.v_breve + dt * (rhs + D @ s.v_breve))
-        acc = (raw - s.v_breve) / dt
-    else:
-        acc = np.linalg.solve(M, rhs)
-    v_breve = _sat_blocks(s.v_breve + dt * _sat_blocks(acc, lim, "acc"), lim, "rate")
-    integral = np.clip(s.integral + dt * err.com_pos_err, -c.com.i_max, c.com.i_max)
-    a_c = (-c.com.K * err.com_pos_err - c.com.D * err.com_vel_err - c.com.Ki * integral
-           + gamma**2 * ref.a_c)
-    v_c = _sat(s.v_c + dt * _sat(a_c, lim.v_c_acc), lim.v_c_rate)
-    v = np.clip(Gi @ np.r_[v_c, v_breve], -lim.v_max, lim.v_max)
-    return {"v_breve": v_breve, "v_c": v_c, "v": v,
-            "q": pin.integrate(mission.robot.model, s.q, v * dt)}
-
-
-@check("16", "one Mission.step (the compiled loop) vs the step re-assembled in NumPy from "
-       "eqs. 12–16, at mid-mission states with active limits", "pipeline.sim.mission.Mission.step")
+@check("16", "one Mission.step (the compiled loop) vs the step computed from eqs. 1–22 in "
+       "NumPy, SciPy and Pinocchio (step_from_equations), at mid-mission states with active "
+       "limits", "pipeline.sim.mission.Mission.step")
 def _mission_step() -> Outcome:
     from pipeline.sim.mission import Mission
     from pipeline.spec import with_overrides
+    from pipeline.verify.step_from_equations import expected_step
 
     diffs, sat_steps = [], 0
     for integ in ("explicit", "imex"):
@@ -147,8 +101,9 @@ def _mission_step() -> Outcome:
         for k in range(121):
             nxt, row = mission.step(s)
             if k % 30 == 0:
-                ref = _reassembled_step(mission, s)
-                diffs += [maxdiff(getattr(nxt, key), val) for key, val in ref.items()]
+                _, ref = expected_step(mission, s)
+                diffs += [maxdiff(getattr(nxt, key), ref[key])
+                          for key in ("v_breve", "v_c", "v", "q")]
                 sat_steps += int(any(v for key, v in row.items() if key.startswith("sat_")))
             s = nxt
     return Outcome(f"spec {check_spec().name}, explicit and imex, steps 0, 30, …, 120 "
