@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.jit import jit
+from pipeline.sim.lapack import cholesky_lower, inverse
 from pipeline.sim.limits import saturate_blocks
 
 
@@ -104,6 +105,6 @@ def damping_rates(M_breve: np.ndarray, D_breve: np.ndarray) -> np.ndarray:
     M̆ is symmetric positive definite, so M̆⁻¹D̆ is similar to that symmetric matrix and its
     eigenvalues, the damping-mode decay rates, are real.
     """
-    L_inv = np.linalg.inv(np.linalg.cholesky(np.ascontiguousarray(M_breve)))
+    L_inv = inverse(cholesky_lower(np.ascontiguousarray(M_breve)))
     S = L_inv @ np.ascontiguousarray(D_breve) @ L_inv.T
     return np.linalg.eigvalsh(0.5 * (S + S.T))

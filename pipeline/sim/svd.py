@@ -9,21 +9,15 @@ batched :func:`svd_right` is dgesvd computing Vᵀ but not U, which it does not 
 
 from __future__ import annotations
 
-import llvmlite.binding as llvm
 import numpy as np
-from numba import types
-from numba.extending import get_cython_function_address
 
 from pipeline.sim.jit import jit
+from pipeline.sim.lapack import routine
 
-# Bound by symbol name, not as a ctypes pointer, so the kernels that call it can be cached:
-# the name is registered again at every import.
-llvm.add_symbol("pipeline_dgesdd",
-                get_cython_function_address("scipy.linalg.cython_lapack", "dgesdd"))
-_dgesdd = types.ExternalFunction("pipeline_dgesdd", types.void(*([types.voidptr] * 14)))
-llvm.add_symbol("pipeline_dgesvd",
-                get_cython_function_address("scipy.linalg.cython_lapack", "dgesvd"))
-_dgesvd = types.ExternalFunction("pipeline_dgesvd", types.void(*([types.voidptr] * 14)))
+# Bound by name in compiled code, through ctypes under NUMBA_DISABLE_JIT (see
+# :func:`pipeline.sim.lapack.routine`): the same LAPACK routine in both modes.
+_dgesdd = routine("dgesdd", 14)
+_dgesvd = routine("dgesvd", 14)
 
 
 @jit
