@@ -11,7 +11,8 @@ MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 SOURCES := $(shell find pipeline -name '*.py' -o -name '*.j2') $(wildcard specs/*.yaml) $(wildcard specs/robots/*)
 
-.PHONY: all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
+.PHONY: all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean \
+	slurm-up slurm-down
 
 # The claims first (they run what is missing, the sweeps included), then the reports, which
 # link the register; the reports are rendered even when a claim fails, and the recipe then
@@ -88,6 +89,15 @@ sweep: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)
+
+# A single-node SLURM on localhost (Debian's munge, slurmctld, slurmd; state in /tmp/breve-slurm)
+# for the SLURM tests (pytest -m slurm) and the sweep throughput of `make bench`.
+slurm-up:
+	scripts/slurm-local.sh install
+	scripts/slurm-local.sh up
+
+slurm-down:
+	scripts/slurm-local.sh down
 
 baselines: $(STAMP)
 	$(PY) -m pipeline.reports.baselines check
