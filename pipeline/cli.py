@@ -89,6 +89,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--slurm", action="store_true", help="start workers through dask-jobqueue")
+    s.add_argument("--worker-timeout", type=float, default=None, metavar="S",
+                   help="fail (exit 2) if no worker joins within S s (default 300)")
+    s.add_argument("--lifetime", type=float, default=None, metavar="S",
+                   help="SLURM workers retire after S s (default: from the walltime; 0: never)")
     s.add_argument("--name", default=None, help="sweep name (default: from spec and keys)")
     s.add_argument("--logs", default="logs/sweeps")
     s.add_argument("--out", default="generated_reports/sweeps")
