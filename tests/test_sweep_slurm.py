@@ -90,13 +90,15 @@ def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
     record_property("wall_s", round(time.monotonic() - t0, 1))
 
 
-def _walltime_sweep(tmp: Path, lifetime: list[str], record_property) -> tuple[list[str], dict]:
-    """A sweep of about 2 min of work on two jobs of a 1-minute walltime: every point must
-    complete although each first job ends mid-sweep."""
+def _walltime_sweep(tmp: Path, duration: int, lifetime: list[str], record_property
+                    ) -> tuple[list[str], dict]:
+    """12 points on two jobs of a 1-minute walltime: every point must complete although the
+    first jobs end mid-sweep. At ~0.25 ms per simulated and analysed step on an idle core,
+    ``duration`` s of mission at dt ≈ 0.025 s is ``duration`` / 100 s of work per point."""
     dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
     t0 = time.monotonic()
-    r = sweep(tmp, "short_nominal", "--set", "mission.duration=12", "--set", f"mission.dt={dts}",
-              "--slurm", "--workers", "2", *lifetime, timeout=540,
+    r = sweep(tmp, "short_nominal", "--set", f"mission.duration={duration}",
+              "--set", f"mission.dt={dts}", "--slurm", "--workers", "2", *lifetime, timeout=900,
               **LOCAL, DASK_JOBQUEUE__SLURM__WALLTIME="00:01:00")
     wall = time.monotonic() - t0
     assert r.returncode == 0, r.stderr[-3000:]
@@ -114,7 +116,8 @@ def _walltime_sweep(tmp: Path, lifetime: list[str], record_property) -> tuple[li
 def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
     """Worker lifetime 40 ± 3 s (the default for a 1-minute walltime): each worker retires
     gracefully before SLURM's limit and adapt submits a replacement job."""
-    jobs, logs = _walltime_sweep(tmp_path, [], record_property)
+    # ~140 s of work, ~70 s on two workers: past the first retirements at ~45 s
+    jobs, logs = _walltime_sweep(tmp_path, 1200, [], record_property)
     assert set(logs) <= set(jobs)
     assert any("lifetime" in text for text in logs.values()), logs
     assert not any("DUE TO TIME LIMIT" in text for text in logs.values())
@@ -123,7 +126,8 @@ def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, reco
 def test_slurm_walltime_hard_kill_is_survived(slurm_up, tmp_path, record_property):
     """No lifetime: SLURM kills the jobs at the walltime (SIGTERM, SIGKILL KillWait s later),
     mid-task; the points they ran are rescheduled and the killed jobs replaced."""
-    jobs, logs = _walltime_sweep(tmp_path, ["--lifetime", "0"], record_property)
+    # ~240 s of work, ~120 s on two workers: past SLURM's kill at 60–95 s after the start
+    jobs, logs = _walltime_sweep(tmp_path, 2000, ["--lifetime", "0"], record_property)
     assert set(logs) <= set(jobs)
     assert any("DUE TO TIME LIMIT" in text for text in logs.values()), logs
 

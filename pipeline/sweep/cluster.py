@@ -16,6 +16,7 @@ use N cores. The sweep fails with one line (exit 2) when no worker joins within
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import sys
@@ -156,6 +157,18 @@ def _sbatch_error(exc: BaseException) -> str:
     return "; ".join(lines) or type(exc).__name__
 
 
+class _DropRecorded(logging.Filter):
+    """Drops the logged traceback of a job submission that ``Jobs`` already recorded (tornado
+    logs the failed callback; the driver reports sbatch's reason in one line instead)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not getattr(exc, "breve_recorded", False)
+
+
+_DROP_RECORDED = _DropRecorded()
+
+
 def slurm_cluster(log_dir: Path, lifetime: float | None = None, jobs: Jobs | None = None):
     """A SLURMCluster (no job submitted until it is scaled or adapted); each job it submits
     is recorded in ``jobs`` (its id, or ``sbatch``'s refusal)."""
@@ -174,6 +187,7 @@ def slurm_cluster(log_dir: Path, lifetime: float | None = None, jobs: Jobs | Non
                 await super().start()
             except Exception as exc:
                 record.errors.append(_sbatch_error(exc))
+                exc.breve_recorded = True  # the driver reports it: no logged traceback
                 raise
             record.ids.append(str(self.job_id))
 
@@ -230,6 +244,9 @@ def open_client(options: ClusterOptions) -> Iterator[Session]:
         jobs = None
         if options.slurm:
             jobs = Jobs()
+            for name in ("tornado.application", "distributed.deploy.adaptive_core",
+                         "distributed.deploy.adaptive", "distributed.utils"):
+                logging.getLogger(name).addFilter(_DROP_RECORDED)
             cluster = slurm_cluster(options.slurm_log_dir, options.lifetime, jobs)
             # adapt, not scale: with scale(jobs=N) a job that ends (walltime, lifetime, a
             # node failure) is never replaced; adapt resubmits to keep N jobs.
@@ -237,8 +254,22 @@ def open_client(options: ClusterOptions) -> Iterator[Session]:
         else:
             cluster = LocalCluster(n_workers=options.workers, threads_per_worker=1,
                                    processes=True, dashboard_address="127.0.0.1:0")
-        with cluster, Client(cluster, set_as_default=False) as client:
-            what = "--slurm" if options.slurm else "LocalCluster"
-            wait_for_workers(client, 1, options.worker_timeout, what, jobs)
-            yield Session(client, "slurm" if options.slurm else "local", options.workers,
-                          jobs, time.perf_counter() - t0)
+        try:
+            with Client(cluster, set_as_default=False) as client:
+                what = "--slurm" if options.slurm else "LocalCluster"
+                wait_for_workers(client, 1, options.worker_timeout, what, jobs)
+                yield Session(client, "slurm" if options.slurm else "local", options.workers,
+                              jobs, time.perf_counter() - t0)
+        finally:
+            _close(cluster, jobs)
+
+
+def _close(cluster, jobs: Jobs | None) -> None:
+    """Close the cluster (cancelling its jobs). A job that sbatch refused was never started,
+    and SpecCluster's close then trips on its state: that error would hide sbatch's reason,
+    which is already the sweep's error."""
+    try:
+        cluster.close()
+    except Exception:
+        if not (jobs and jobs.errors):
+            raise
