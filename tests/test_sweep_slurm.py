@@ -90,23 +90,27 @@ def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
     record_property("wall_s", round(time.monotonic() - t0, 1))
 
 
-def _walltime_sweep(tmp: Path, duration: int, lifetime: list[str], record_property
+def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
                     ) -> tuple[list[str], dict]:
-    """12 points on two jobs of a 1-minute walltime: every point must complete although the
-    first jobs end mid-sweep. At ~0.25 ms per simulated and analysed step on an idle core,
-    ``duration`` s of mission at dt ≈ 0.025 s is ``duration`` / 100 s of work per point."""
+    """12 × ``gains`` points on two jobs of a 1-minute walltime: every point must complete
+    although the first jobs end mid-sweep. A point is a 250-s mission at dt ≈ 0.025 s, about
+    2.5 s of work on an idle core (10 000 steps at ~0.25 ms): well below a worker's lifetime
+    even on a loaded host, so that a retiring worker hands back little work."""
     dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
+    ds = ",".join(f"{1.0 + 0.25 * i:g}" for i in range(gains))
     t0 = time.monotonic()
-    r = sweep(tmp, "short_nominal", "--set", f"mission.duration={duration}",
-              "--set", f"mission.dt={dts}", "--slurm", "--workers", "2", *lifetime, timeout=900,
-              **LOCAL, DASK_JOBQUEUE__SLURM__WALLTIME="00:01:00")
+    r = sweep(tmp, "short_nominal", "--set", "mission.duration=250", "--set", f"mission.dt={dts}",
+              "--set", f"controller.gains.cam_ori.D={ds}", "--slurm", "--workers", "2",
+              *lifetime, timeout=900, **LOCAL, DASK_JOBQUEUE__SLURM__WALLTIME="00:01:00")
     wall = time.monotonic() - t0
     assert r.returncode == 0, r.stderr[-3000:]
     t = table(tmp)
-    assert len(t) == 12 and (t["status"] == "complete").all(), t[["point", "status", "error"]]
+    assert len(t) == 12 * gains and (t["status"] == "complete").all(), \
+        t.loc[t["status"] != "complete", ["point", "error"]]
     jobs = _jobs(r.stdout)
     assert len(jobs) > 2, f"no job was replaced: {jobs}"
     record_property("wall_s", round(wall, 1))
+    record_property("points", len(t))
     record_property("jobs", len(jobs))
     record_property("replaced", len(jobs) - 2)
     record_property("retried_points", int((t["attempts"] > 1).sum()))
@@ -116,20 +120,21 @@ def _walltime_sweep(tmp: Path, duration: int, lifetime: list[str], record_proper
 def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
     """Worker lifetime 40 ± 3 s (the default for a 1-minute walltime): each worker retires
     gracefully before SLURM's limit and adapt submits a replacement job."""
-    # ~140 s of work, ~70 s on two workers: past the first retirements at ~45 s
-    jobs, logs = _walltime_sweep(tmp_path, 1200, [], record_property)
+    # 48 points, ~120 s of work, ~60 s on two workers: past the first retirements at ~45 s
+    jobs, logs = _walltime_sweep(tmp_path, 4, [], record_property)
     assert set(logs) <= set(jobs)
-    assert any("lifetime" in text for text in logs.values()), logs
+    assert any("worker-lifetime-reached" in text for text in logs.values()), logs
     assert not any("DUE TO TIME LIMIT" in text for text in logs.values())
 
 
 def test_slurm_walltime_hard_kill_is_survived(slurm_up, tmp_path, record_property):
     """No lifetime: SLURM kills the jobs at the walltime (SIGTERM, SIGKILL KillWait s later),
     mid-task; the points they ran are rescheduled and the killed jobs replaced."""
-    # ~240 s of work, ~120 s on two workers: past SLURM's kill at 60–95 s after the start
-    jobs, logs = _walltime_sweep(tmp_path, 2000, ["--lifetime", "0"], record_property)
+    # 96 points, ~240 s of work, ~120 s on two workers: past SLURM's kill 60–95 s after start
+    jobs, logs = _walltime_sweep(tmp_path, 8, ["--lifetime", "0"], record_property)
     assert set(logs) <= set(jobs)
     assert any("DUE TO TIME LIMIT" in text for text in logs.values()), logs
+    assert not any("worker-lifetime-reached" in text for text in logs.values())
 
 
 def test_slurm_refused_sbatch_is_exit_2_in_seconds(slurm_up, tmp_path):
