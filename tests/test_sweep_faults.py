@@ -130,7 +130,7 @@ def test_sweep_on_a_real_scheduler_that_outlives_it(tmp_path):
         address = json.loads(info.read_text())["address"]
         procs += [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
                                     address, "--nthreads", "1", "--name", f"w{i}",
-                                    "--no-dashboard", "--listen-address", "tcp://127.0.0.1:0"],
+                                    "--no-dashboard", "--host", "127.0.0.1"],
                                    cwd=PROJECT_ROOT, env=env, stdout=subprocess.DEVNULL,
                                    stderr=subprocess.DEVNULL) for i in range(2)]
         r = sweep(tmp_path, "short_nominal", "--set", "mission.duration=1.0",
