@@ -453,3 +453,18 @@ def test_a_nan_lag1_is_no_evidence_and_no_bracket_holds_on_it():
     lags = [0.99, 0.98, 0.97, -0.9, float("nan"), -0.99]
     b = stability_bracket(_dt_table(dts, lags, [0.0156] * 6))
     assert b["undefined_lag1"] == [0.02] and not b["holds"] and not b["far_agree"]
+
+
+def test_throughput_figures_take_the_steady_state_after_each_worker_has_finished_once():
+    """``make bench``'s sweep figures (pipeline.sweep.throughput), on made-up finish times:
+    two workers, the first two finishes slow (start-up), then one finish every 0.3 s with
+    tasks of 0.5 s: 0.3 s × 2 workers − 0.5 s = 0.1 s of overhead per point."""
+    from pipeline.sweep.throughput import throughput_of
+
+    records = [{"received": t, "seconds": 0.5, "status": "complete"}
+               for t in (4.0, 4.5, 4.8, 5.1, 5.4, 5.7)]
+    f = throughput_of("local2", 2, 3.0, 6.0, records)
+    assert f.steady_s_per_point == pytest.approx(0.3)
+    assert f.points_per_s == pytest.approx(1 / 0.3)
+    assert f.overhead_s == pytest.approx(0.1) and f.overhead_ratio == pytest.approx(0.2)
+    assert (f.points, f.complete, f.startup_s) == (6, 6, 3.0)

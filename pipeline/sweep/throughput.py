@@ -53,7 +53,7 @@ class Throughput:
         return asdict(self)
 
 
-def _figures(setting: str, workers: int, startup: float, wall: float, records: list[dict]
+def throughput_of(setting: str, workers: int, startup: float, wall: float, records: list[dict]
              ) -> Throughput:
     done = sorted(r["received"] for r in records)
     task = float(np.median([r["seconds"] for r in records]))
@@ -115,7 +115,7 @@ def measure(setting: str, root: Path) -> Throughput:
         for p in sweep.points:
             rec = run_point(p.spec, str(sweep.log_dir))
             records.append({**rec, "received": time.perf_counter()})
-        return _figures(setting, 1, startup, time.perf_counter() - t0, records)
+        return throughput_of(setting, 1, startup, time.perf_counter() - t0, records)
     slurm = setting.startswith("slurm")
     if slurm and (why := slurm_ready()):
         return Throughput(setting, 2, skipped=why)
@@ -130,7 +130,7 @@ def measure(setting: str, root: Path) -> Throughput:
         records = execute(sweep, session.client, worker_timeout=options.worker_timeout,
                           jobs=session.jobs)
         wall = time.perf_counter() - t0
-    return _figures(setting, 2, startup, wall, records)
+    return throughput_of(setting, 2, startup, wall, records)
 
 
 def sweep_throughput(settings: tuple[str, ...] = ("inprocess", "local2", "slurm2"),
