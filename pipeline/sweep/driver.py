@@ -100,7 +100,7 @@ class _Watchdog(threading.Thread):
     queue that stopped starting jobs, an sbatch that now fails): the sweep then ends with
     failed rows instead of waiting forever. A liveness check, not a look at the results."""
 
-    def __init__(self, client, futures, timeout: float, jobs) -> None:
+    def __init__(self, client, futures: set, timeout: float, jobs) -> None:
         super().__init__(daemon=True, name="sweep-watchdog")
         self.client, self.futures, self.timeout, self.jobs = client, futures, timeout, jobs
         self.stop = threading.Event()
@@ -122,7 +122,7 @@ class _Watchdog(threading.Thread):
                 if self.jobs is not None and self.jobs.errors:
                     why += f" (sbatch: {self.jobs.errors[-1]})"
                 self.reason = why
-                self.client.cancel([f for f in self.futures if not f.done()])
+                self.client.cancel(list(self.futures.copy()))  # the main thread edits it
                 return
 
 
@@ -141,16 +141,23 @@ def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float 
     client.subscribe_topic(topic, tracker.started)
     futures = {client.submit(sweep_task, p.spec, str(sweep.log_dir), topic, pure=False,
                              key=f"sweep-{p.name}-{tag}"): p for p in sweep.points}
-    watchdog = _Watchdog(client, list(futures), worker_timeout, jobs)
+    pending = set(futures)
+    watchdog = _Watchdog(client, pending, worker_timeout, jobs)
     watchdog.start()
     records: dict[str, dict] = {}
     try:
-        for fut in as_completed(futures, loop=client.loop):
-            rec = _outcome(fut, futures[fut], watchdog.reason)
+        for fut in as_completed(list(futures), loop=client.loop):
+            point = futures.pop(fut)
+            rec = _outcome(fut, point, watchdog.reason)
+            # Release the result at once: a result the client still refers to is recomputed
+            # when the worker holding it dies or retires (a walltime), so every finished point
+            # would run again each time a job ends.
+            pending.discard(fut)
+            fut.release()
             records[rec["point"]] = rec
             tracker.finished(rec["point"], rec["status"] == "complete")
     except BaseException:
-        client.cancel([f for f in futures if not f.done()])  # what is queued never starts
+        client.cancel(list(pending))  # what is queued never starts
         raise
     finally:
         watchdog.stop.set()
