@@ -86,13 +86,21 @@ def _failed_record(point: Point, error: str) -> dict:
 
 
 def _outcome(fut, point: Point, why_cancelled: str) -> dict:
-    if fut.status == "finished":
+    """The record of a completed future. A ``lost`` one (its worker died, at a walltime say,
+    between finishing and our taking the result) is computed again by Dask: wait for it."""
+    from distributed.client import FutureCancelledError
+
+    if fut.status == "cancelled":
+        return _failed_record(point, "task cancelled: "
+                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+    try:
         return fut.result()
-    if fut.status == "error":  # a bug, or KilledWorker: its workers died too many times
-        exc = fut.exception()
+    except FutureCancelledError:
+        return _failed_record(point, "task cancelled: "
+                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+    except Exception as exc:  # a bug, or KilledWorker: its workers died too many times
         text = str(exc).splitlines()[0] if str(exc) else ""
         return _failed_record(point, f"{type(exc).__name__}: {text}")
-    return _failed_record(point, f"task {fut.status}: {why_cancelled or 'the scheduler was lost'}")
 
 
 class _Watchdog(threading.Thread):
