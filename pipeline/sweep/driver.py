@@ -162,6 +162,7 @@ def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float 
             # would run again each time a job ends.
             pending.discard(fut)
             fut.release()
+            rec["received"] = time.perf_counter()  # for the throughput (not in the table)
             records[rec["point"]] = rec
             tracker.finished(rec["point"], rec["status"] == "complete")
     except BaseException:
