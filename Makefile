@@ -10,7 +10,8 @@ REPORTS := generated_reports
 MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 
-.PHONY: help all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean
+.PHONY: help all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean \
+	slurm-up slurm-down
 
 .DEFAULT_GOAL := all
 
@@ -100,6 +101,17 @@ sweep: $(STAMP)
 ## bench: simulator and analysis cost against the Pinocchio floor -> generated_reports/bench.md
 bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)
+
+# A single-node SLURM on localhost (Debian's munge, slurmctld, slurmd; state in /tmp/breve-slurm)
+# for the SLURM tests (pytest -m slurm) and the sweep throughput of `make bench`.
+## slurm-up: start a single-node SLURM on localhost (installs Debian's packages; root)
+slurm-up:
+	scripts/slurm-local.sh install
+	scripts/slurm-local.sh up
+
+## slurm-down: stop the local SLURM that slurm-up started
+slurm-down:
+	scripts/slurm-local.sh down
 
 ## baselines: compare the pinned baseline logs under logs/baselines/ with fresh runs
 baselines: $(STAMP)

@@ -15,7 +15,11 @@ drift of the host's speed between repeats does not enter them:
 - ``analysis_step_us``: the per-step analysis of a log (Γ rebuilt from q, per-direction SVD,
   lag-1), streamed by row group as ``analyze`` does it;
 - growth of mission wall time with length (10³, 10⁴, 10⁵ steps) and its fitted exponent;
-- peak memory (max RSS of a fresh process) of ``analyze`` on a 10⁵- and a 10⁶-step log.
+- peak memory (max RSS of a fresh process) of ``analyze`` on a 10⁵- and a 10⁶-step log;
+- sweep throughput (``sweep.<setting>.*``): points per second, start-up and the per-point
+  overhead of Dask, in process, on a 2-worker LocalCluster and on the local SLURM
+  (``pipeline.sweep.throughput``; the SLURM setting is recorded as skipped, with the reason,
+  when no SLURM answers).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
 from pipeline.spec import Spec, canonical_hash, load_spec, with_overrides
+from pipeline.sweep.throughput import sweep_throughput
 
 
 def _stats(samples: list[float]) -> dict:
@@ -208,6 +213,7 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         big = tiled_log(long, tmp / "big" / "bench_long" / "run.parquet", 10)
         memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
                   f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
+    sweeps = {k: v.as_dict() for k, v in sweep_throughput(progress=_progress).items()}
     result = {
         "floor_us": costs["floor_us"],
         "sim_step_us": costs["sim_step_us"],
@@ -219,6 +225,7 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         "growth": grow,
         "peak_memory_mb": memory,
         "steps_per_s": 1e6 / costs["sim_step_us"]["median"],
+        "sweep": sweeps,
         "quick": quick,
         "machine": machine(),
     }
@@ -276,7 +283,28 @@ the trajectory); it is read by row groups.
 | steps | MB |
 |---|---|
 {mem}
+
+## Sweep throughput (32 points: 8 dt × 4 bus D, 20-s nominal missions)
+
+Overhead per point = steady-state wall time per point × workers − the median per-point
+simulation and analysis time; its ratio to that time should be below 1. Start-up (cluster,
+job submission, workers up with their imports) is apart.
+
+{sweep_markdown(r["sweep"])}
 """
+
+
+def sweep_markdown(sweeps: dict) -> str:
+    rows = ["| setting | workers | points/s | start-up (s) | task (s) | overhead/point (s) "
+            "| overhead ratio | against the mean task |", "|---|---|---|---|---|---|---|---|"]
+    for name, s in sweeps.items():
+        if s["skipped"]:
+            rows.append(f"| {name} | {s['workers']} | skipped: {s['skipped']} | | | | | |")
+        else:
+            rows.append(f"| {name} | {s['workers']} | {s['points_per_s']:.2f} | "
+                        f"{s['startup_s']:.1f} | {s['task_s']:.2f} | {s['overhead_s']:.3f} | "
+                        f"{s['overhead_ratio']:.3f} | {s['overhead_ratio_mean']:.3f} |")
+    return "\n".join(rows)
 
 
 def bench_command(args) -> int:

@@ -216,6 +216,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--slurm", action="store_true",
                    help="start the workers as SLURM jobs through dask-jobqueue "
                    "(default: off; e.g. --slurm --workers 16)")
+    s.add_argument("--worker-timeout", type=float, default=None, metavar="S",
+                   help="fail (exit 2) if no worker joins within S seconds "
+                   "(default: 300; e.g. --worker-timeout 600)")
+    s.add_argument("--lifetime", type=float, default=None, metavar="S",
+                   help="SLURM workers retire after S seconds, before their walltime "
+                   "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
     s.add_argument("--name", default=None,
                    help="sweep name, the folder of its logs and table (default: from the "
                    "spec and the keys; e.g. --name nominal_dt)")

@@ -76,3 +76,30 @@ def footer_metadata(path: Path) -> dict[bytes, bytes]:
     from pipeline.logs import file_metadata
 
     return {k.encode(): v.encode() for k, v in file_metadata(path).items()}
+
+
+# -- SLURM tests: CI must run them -----------------------------------------------------------
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under ``CI=true`` a skipped ``slurm`` test is a failure: CI installs and starts SLURM
+    (.ci/run), so a skip there means the SLURM path went untested."""
+    outcome = yield
+    rep = outcome.get_result()
+    if (rep.skipped and item.get_closest_marker("slurm") is not None
+            and os.environ.get("CI", "").lower() == "true"):
+        reason = rep.longrepr[2] if isinstance(rep.longrepr, tuple) else str(rep.longrepr)
+        rep.outcome = "failed"
+        rep.longrepr = f"CI=true: a SLURM test must run, not skip ({reason})"
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The figures the SLURM tests record (jobs submitted and replaced, wall time), so that
+    a CI log shows them."""
+    lines = [f"{rep.nodeid}: " + ", ".join(f"{k}={v}" for k, v in rep.user_properties)
+             for rep in terminalreporter.getreports("passed")
+             if rep.when == "call" and rep.user_properties]
+    if lines:
+        terminalreporter.section("recorded figures")
+        for line in lines:
+            terminalreporter.write_line(line)

@@ -25,16 +25,21 @@ import numpy as np
 import pandas as pd
 import psutil
 import pytest
+from sweep_helpers import sweep, sweep_argv, sweep_env, table
 
 from pipeline.errors import LogError, SpecError
 from pipeline.logs import num_rows, read_meta
 from pipeline.paths import PROJECT_ROOT
 from pipeline.spec import load_spec
 from pipeline.sweep import build_grid, parse_sets, plan_sweep, point_name, stability_bracket
-from pipeline.sweep.cluster import scheduler_address, slurm_kwargs
+from pipeline.sweep.cluster import (
+    default_lifetime,
+    scheduler_address,
+    slurm_kwargs,
+    walltime_seconds,
+)
 from pipeline.sweep.grid import parse_value
 from pipeline.sweep.point import point_lock, remove_stale_temps
-from pipeline.sweep.results import read_sweep_table
 
 SHORT = ["--set", "mission.duration=1.0"]
 FOUR = [*SHORT, "--set", "mission.dt=0.02,0.03", "--set", "controller.gains.cam_ori.D=1.0,1.5"]
@@ -48,27 +53,6 @@ controller:
            nu_e_lin_acc: 1.0e+300, nu_e_ang_rate: 1.0e+300, nu_e_ang_acc: 1.0e+300,
            v_c_rate: 1.0e+300, v_c_acc: 1.0e+300, v_max: 1.0e+300}
 """
-
-
-def _env(**extra: str) -> dict[str, str]:
-    env = dict(os.environ)
-    env.pop("DASK_SCHEDULER_ADDRESS", None)  # only the sweeps that ask for one use a scheduler
-    return {**env, "PYTHONWARNINGS": "error", **extra}
-
-
-def _argv(tmp: Path, *args: str, name: str = "s", out: str = "out") -> list[str]:
-    return [sys.executable, "-m", "pipeline", "sweep", *args, "--name", name,
-            "--logs", str(tmp / "logs"), "--out", str(tmp / out)]
-
-
-def sweep(tmp: Path, *args: str, name: str = "s", out: str = "out", timeout: float = 180,
-          **env: str) -> subprocess.CompletedProcess:
-    return subprocess.run(_argv(tmp, *args, name=name, out=out), cwd=PROJECT_ROOT,
-                          capture_output=True, text=True, timeout=timeout, env=_env(**env))
-
-
-def table(tmp: Path, name: str = "s", out: str = "out") -> pd.DataFrame:
-    return read_sweep_table(tmp / out / name / "sweep.parquet")
 
 
 def code_version_of(path: Path) -> str:
@@ -172,6 +156,10 @@ def test_four_points_then_nothing_reruns_then_only_what_is_missing(tmp_path):
     assert d1.iloc[1] / d1.iloc[0] == pytest.approx(1.5, rel=0.02)
     assert "4 points: 4 complete, 0 failed; 4 simulated now" in r.stdout
     assert "point/s" not in r.stderr and "\r" not in r.stderr  # no progress bar off a terminal
+    # but one line per change of the counts, ending with all four done
+    progress = [ln for ln in r.stderr.splitlines() if ln.startswith("sweep s: ")]
+    assert progress[-1] == "sweep s: 4/4 finished (4 done, 0 failed), 0 running"
+    assert len(progress) == len(set(progress)) and len(progress) >= 5
     folders = {p: tmp_path / "logs" / "s" / p for p in t1["point"]}
     for p, f in folders.items():
         assert_clean_valid(f, t1.set_index("point").loc[p, "spec_hash"])
@@ -216,10 +204,10 @@ def test_diverging_point_is_a_failed_row_and_exit_1_naming_it(tmp_path):
     # stderr on a pseudo-terminal: the progress bar shows, with the failed count
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))  # 120 columns
-    proc = subprocess.Popen(_argv(tmp_path, str(spec), "--set",
+    proc = subprocess.Popen(sweep_argv(tmp_path, str(spec), "--set",
                                   "controller.gains.cam_ori.D=1.0,1e6", "--workers", "2"),
                             cwd=PROJECT_ROOT, stdout=subprocess.PIPE, stderr=slave, text=True,
-                            env=_env())
+                            env=sweep_env())
     os.close(slave)
     chunks: list[bytes] = []
     reader = threading.Thread(target=_drain, args=(master, chunks), daemon=True)
@@ -256,8 +244,8 @@ def _drain(fd: int, chunks: list[bytes]) -> None:
 def test_killed_worker_does_not_lose_the_sweep(tmp_path):
     args = ["short_nominal", "--set", "mission.duration=3.0",
             "--set", "mission.dt=0.005,0.006,0.007,0.008", "--workers", "2"]
-    proc = subprocess.Popen(_argv(tmp_path, *args), cwd=PROJECT_ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=_env())
+    proc = subprocess.Popen(sweep_argv(tmp_path, *args), cwd=PROJECT_ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=sweep_env())
     killed = None
     deadline = time.monotonic() + 120
     try:
@@ -276,7 +264,7 @@ def test_killed_worker_does_not_lose_the_sweep(tmp_path):
                     killed = (pid, lock.parent.name)
                     break
             time.sleep(0.02)
-        _, err = proc.communicate(timeout=180)
+        out, err = proc.communicate(timeout=180)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -285,6 +273,8 @@ def test_killed_worker_does_not_lose_the_sweep(tmp_path):
     t = table(tmp_path).set_index("point")
     assert len(t) == 4 and (t["status"] == "complete").all()
     assert not t.loc[killed[1], "worker"].endswith(f":{killed[0]}")  # redone elsewhere
+    assert t.loc[killed[1], "attempts"] == 2
+    assert f"retried {killed[1]}: 2 attempts" in out and "; 1 retried ->" in out
     for p in t.index:
         assert_clean_valid(tmp_path / "logs" / "s" / p, t.loc[p, "spec_hash"])
 
@@ -292,10 +282,10 @@ def test_killed_worker_does_not_lose_the_sweep(tmp_path):
 def test_two_overlapping_sweeps_at_once_share_each_point_once(tmp_path):
     grids = {"a": "0.01,0.015,0.02", "b": "0.015,0.02,0.025"}
     procs = {k: subprocess.Popen(
-        _argv(tmp_path, "short_nominal", "--set", "mission.duration=2.0", "--set",
+        sweep_argv(tmp_path, "short_nominal", "--set", "mission.duration=2.0", "--set",
               f"mission.dt={g}", "--workers", "2", name="overlap", out=f"out_{k}"),
         cwd=PROJECT_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=_env()) for k, g in grids.items()}
+        env=sweep_env()) for k, g in grids.items()}
     results = {k: p.communicate(timeout=240) for k, p in procs.items()}
     for k, p in procs.items():
         assert p.returncode == 0, results[k][1]
@@ -390,10 +380,30 @@ def test_slurm_job_script(tmp_path):
     assert lines[0].startswith("#!") and "#SBATCH -J breve-sweep" in lines
     assert "#SBATCH --cpus-per-task=1" in lines and "#SBATCH --mem=2G" in lines
     assert f"#SBATCH -o {tmp_path}/breve-sweep-%J.out" in lines
-    assert f"cd {PROJECT_ROOT}" in lines
+    assert f"cd {Path.cwd()}" in lines
+    assert "export OMP_NUM_THREADS=1" in lines and "export NUMBA_NUM_THREADS=1" in lines
     worker = lines[-1]
     assert worker.startswith(f"{sys.executable} -m distributed.cli.dask_worker tcp://")
     assert "--nthreads 1" in worker and "--nanny" in worker
+    # retire before the default 30-minute walltime: 27 min ± 45 s
+    assert worker.endswith("--lifetime 1620s --lifetime-stagger 45s")
+    assert kw["worker_extra_args"] == ["--lifetime", "1620s", "--lifetime-stagger", "45s"]
+    assert "--lifetime" not in slurm_kwargs(tmp_path, lifetime=0)["worker_extra_args"]
+
+
+@pytest.mark.parametrize(("text", "seconds"), [
+    ("30", 1800), ("1:30", 90), ("00:01:00", 60), ("2-00", 172800), ("1-02:03", 93780),
+    ("1-02:03:04", 93784)])
+def test_walltime_formats(text, seconds):
+    assert walltime_seconds(text) == seconds
+
+
+def test_worker_lifetime_leaves_a_margin_before_the_walltime():
+    assert default_lifetime(60) == (40, 3)
+    life, stagger = default_lifetime(7200)
+    assert life + stagger < 7200 - 500 and stagger > 0
+    with pytest.raises(SpecError, match="walltime"):
+        walltime_seconds("soon")
 
 
 # -- the stability bracket (claim C12) ----------------------------------------------------------
@@ -449,3 +459,18 @@ def test_a_nan_lag1_is_no_evidence_and_no_bracket_holds_on_it():
     lags = [0.99, 0.98, 0.97, -0.9, float("nan"), -0.99]
     b = stability_bracket(_dt_table(dts, lags, [0.0156] * 6))
     assert b["undefined_lag1"] == [0.02] and not b["holds"] and not b["far_agree"]
+
+
+def test_throughput_figures_take_the_steady_state_after_each_worker_has_finished_once():
+    """``make bench``'s sweep figures (pipeline.sweep.throughput), on made-up finish times:
+    two workers, the first two finishes slow (start-up), then one finish every 0.3 s with
+    tasks of 0.5 s: 0.3 s × 2 workers − 0.5 s = 0.1 s of overhead per point."""
+    from pipeline.sweep.throughput import throughput_of
+
+    records = [{"received": t, "seconds": 0.5, "status": "complete"}
+               for t in (4.0, 4.5, 4.8, 5.1, 5.4, 5.7)]
+    f = throughput_of("local2", 2, 3.0, 6.0, records)
+    assert f.steady_s_per_point == pytest.approx(0.3)
+    assert f.points_per_s == pytest.approx(1 / 0.3)
+    assert f.overhead_s == pytest.approx(0.1) and f.overhead_ratio == pytest.approx(0.2)
+    assert (f.points, f.complete, f.startup_s) == (6, 6, 3.0)

@@ -7,9 +7,12 @@ of the ``--set`` lists as a Dask task that simulates (unless cached), analyses, 
 
 - ``grid``: ``--set`` parsing, validation of every point, point names;
 - ``point``: the task (cache, per-point lock, run, analyse, record);
-- ``cluster``: LocalCluster, existing scheduler, SLURM;
+- ``cluster``: LocalCluster, existing scheduler, SLURM (adapt, worker lifetimes, sbatch
+  refusals), waiting for workers;
+- ``progress``: points done, failed, running and retried, as they change;
 - ``results``: the table, the summary, ``stability_bracket`` (claim C12);
-- ``driver``: planning, submission, progress, exit codes.
+- ``driver``: planning, submission, results as they complete, signals, exit codes;
+- ``throughput``: points per second and Dask's per-point overhead (``make bench``).
 """
 
 from pipeline.sweep.driver import Sweep, execute, plan_sweep, run_sweep, sweep_command

@@ -5,26 +5,27 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
+import threading
 import time
 import uuid
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from pipeline.budget import Budget, check_mission, check_sweep_size, check_sweep_time
-from pipeline.errors import OutputError, RunFailed
+from pipeline.errors import OutputError, PipelineError, RunFailed
 from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.spec import Spec, load_spec
-from pipeline.sweep.cluster import open_client
+from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
-from pipeline.sweep.point import figures, run_point
+from pipeline.sweep.point import clear_unheld, figures, sweep_task
+from pipeline.sweep.progress import Progress, Tracker
 from pipeline.sweep.results import TABLE_NAME, make_table, summary_text, write_sweep_table
 
-POLL = 0.2  # s between looks at the futures
-PROCESSING_EVERY = 1.0  # s between asks to the scheduler for the running count
+WATCH_EVERY = 2.0  # s between the watchdog's looks at the worker count
 
 
 @dataclass(frozen=True)
@@ -65,59 +66,122 @@ def plan_sweep(spec: str | Path, sets: list[str], name: str | None = None,
                  Path(out).resolve() / sname)
 
 
+class Interrupted(PipelineError):
+    """SIGINT or SIGTERM stopped the sweep: exit 128 + the signal number (130, 143)."""
+
+    def __init__(self, message: str, signum: int) -> None:
+        super().__init__(message)
+        self.exit_code = 128 + signum
+
+
+class _Stop(BaseException):  # raised by the SIGTERM handler in the driver's main thread
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+
+
 def _failed_record(point: Point, error: str) -> dict:
     return {"point": point.name, "status": "failed", "error": error, "ran": False,
             "analysed": False, "n_steps": 0, "seconds": float("nan"), "worker": "",
             "spec_hash": point.spec.spec_hash, "log": "", **figures(None)}
 
 
-def _outcome(fut, point: Point) -> dict:
-    if fut.status == "finished":
+def _outcome(fut, point: Point, why_cancelled: str) -> dict:
+    """The record of a completed future. A ``lost`` one (its worker died, at a walltime say,
+    between finishing and our taking the result) is computed again by Dask: wait for it."""
+    from distributed.client import FutureCancelledError
+
+    if fut.status == "cancelled":
+        return _failed_record(point, "task cancelled: "
+                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+    try:
         return fut.result()
-    if fut.status == "error":  # a bug, or KilledWorker: its workers died too many times
-        exc = fut.exception()
+    except FutureCancelledError:
+        return _failed_record(point, "task cancelled: "
+                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+    except Exception as exc:  # a bug, or KilledWorker: its workers died too many times
         text = str(exc).splitlines()[0] if str(exc) else ""
         return _failed_record(point, f"{type(exc).__name__}: {text}")
-    return _failed_record(point, f"task {fut.status}: the scheduler was lost or the sweep stopped")
 
 
-def execute(sweep: Sweep, client, progress: bool = False) -> list[dict]:
-    """Submit one task per point, collect the records (grid order), with a progress bar."""
+class _Watchdog(threading.Thread):
+    """Cancels what is left when the sweep has had no worker for ``timeout`` s (a SLURM
+    queue that stopped starting jobs, an sbatch that now fails): the sweep then ends with
+    failed rows instead of waiting forever. A liveness check, not a look at the results."""
+
+    def __init__(self, client, futures: set, timeout: float, jobs) -> None:
+        super().__init__(daemon=True, name="sweep-watchdog")
+        self.client, self.futures, self.timeout, self.jobs = client, futures, timeout, jobs
+        self.stop = threading.Event()
+        self.reason = ""
+
+    def run(self) -> None:
+        alone_since = None
+        while not self.stop.wait(WATCH_EVERY):
+            try:
+                n = len(self.client.scheduler_info()["workers"])
+            except Exception:  # the client is closing: nothing left to watch
+                return
+            if n:
+                alone_since = None
+                continue
+            alone_since = alone_since or time.monotonic()
+            if time.monotonic() - alone_since > self.timeout:
+                why = f"no Dask worker for {self.timeout:g} s"
+                if self.jobs is not None and self.jobs.errors:
+                    why += f" (sbatch: {self.jobs.errors[-1]})"
+                self.reason = why
+                self.client.cancel(list(self.futures.copy()))  # the main thread edits it
+                return
+
+
+def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float = 300.0,
+            jobs=None) -> list[dict]:
+    """Submit one task per point and collect the records as they complete (grid order).
+
+    Each record gets ``attempts``, the starts of its task that the driver saw (more than
+    one: a worker died or retired under it and Dask ran it again)."""
+    from distributed import as_completed
+
     tag = uuid.uuid4().hex[:8]
-    futures = {client.submit(run_point, p.spec, str(sweep.log_dir), pure=False,
+    topic = f"breve-sweep-{tag}"
+    shown = Progress(sweep.name, len(sweep.points), terminal=progress)
+    tracker = Tracker([p.name for p in sweep.points], shown)
+    client.subscribe_topic(topic, tracker.started)
+    futures = {client.submit(sweep_task, p.spec, str(sweep.log_dir), topic, pure=False,
                              key=f"sweep-{p.name}-{tag}"): p for p in sweep.points}
-    keys = {f.key for f in futures}
-    records: dict[str, dict] = {}
     pending = set(futures)
-    n_failed, running, asked = 0, 0, 0.0
-    with tqdm(total=len(futures), disable=not progress, unit="point", desc=sweep.name,
-              file=sys.stderr) as bar:
-        while pending:
-            done = {f for f in pending if f.done()}
-            if not done and client.status == "closed":  # the scheduler is gone for good
-                for f in pending:
-                    records[futures[f].name] = _failed_record(futures[f], "scheduler lost")
-                n_failed += len(pending)
-                break
-            pending -= done
-            for f in done:
-                rec = _outcome(f, futures[f])
-                records[rec["point"]] = rec
-                n_failed += rec["status"] != "complete"
-            if progress and time.monotonic() - asked > PROCESSING_EVERY:
-                asked = time.monotonic()
-                running = sum(len(keys.intersection(ks)) for ks in client.processing().values())
-            bar.set_postfix_str(f"done {len(records) - n_failed}, failed {n_failed}, "
-                                f"running {min(running, len(pending))}", refresh=False)
-            bar.update(len(done))
-            if pending and not done:
-                time.sleep(POLL)
+    watchdog = _Watchdog(client, pending, worker_timeout, jobs)
+    watchdog.start()
+    records: dict[str, dict] = {}
+    try:
+        for fut in as_completed(list(futures), loop=client.loop):
+            point = futures.pop(fut)
+            rec = _outcome(fut, point, watchdog.reason)
+            # Release the result at once: a result the client still refers to is recomputed
+            # when the worker holding it dies or retires (a walltime), so every finished point
+            # would run again each time a job ends.
+            pending.discard(fut)
+            fut.release()
+            rec["received"] = time.perf_counter()  # for the throughput (not in the table)
+            records[rec["point"]] = rec
+            tracker.finished(rec["point"], rec["status"] == "complete")
+    except BaseException:
+        client.cancel(list(pending))  # what is queued never starts
+        raise
+    finally:
+        watchdog.stop.set()
+        shown.close()
+        with suppress(Exception):
+            client.unsubscribe_topic(topic)
+    for p in sweep.points:
+        records[p.name]["attempts"] = tracker.attempts(p.name)
     return [records[p.name] for p in sweep.points]
 
 
-def run_sweep(sweep: Sweep, client, progress: bool = False):
+def run_sweep(sweep: Sweep, client, progress: bool = False, worker_timeout: float = 300.0,
+              jobs=None):
     """Run the sweep on ``client`` and write its table; returns (table, path)."""
-    records = execute(sweep, client, progress)
+    records = execute(sweep, client, progress, worker_timeout, jobs)
     df = make_table(sweep.keys, [p.overrides for p in sweep.points], records)
     meta = {"pipeline.sweep": sweep.name, "pipeline.spec": sweep.base.name,
             "pipeline.base_spec_hash": sweep.base.spec_hash,
@@ -139,19 +203,62 @@ def check_writable(folder: Path) -> None:
         raise OutputError(f"{folder}: cannot write: {p} is not writable")
 
 
+def _raise_stop(signum, _frame):
+    # Further signals are ignored from here on, so that closing the cluster and clearing
+    # the leftovers of killed writers finish.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise _Stop(signum)
+
+
+def _finished_points(sweep: Sweep) -> int:
+    return sum((sweep.log_dir / p.name / "run.parquet").is_file() for p in sweep.points)
+
+
 def sweep_command(args: argparse.Namespace) -> int:
     sweep = plan_sweep(args.spec, args.set, args.name, args.logs, args.out, args.workers)
     for folder in (sweep.log_dir, sweep.out_dir):
         check_writable(folder)
-    progress = sys.stderr.isatty()
+    options = ClusterOptions(
+        scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
+        slurm_log_dir=sweep.log_dir.parent / ".slurm",
+        worker_timeout=getattr(args, "worker_timeout", None) or WORKER_TIMEOUT,
+        lifetime=getattr(args, "lifetime", None))
     t0 = time.perf_counter()
-    with open_client(args.scheduler, args.workers, args.slurm,
-                     sweep.log_dir.parent / ".slurm") as client:
-        df, path = run_sweep(sweep, client, progress)
+    # SIGTERM (scancel of a driver job, a batch system's kill) stops the sweep like Ctrl-C:
+    # queued points are cancelled, finished ones are kept, nothing is half-written.
+    previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with open_client(options) as session:
+            df, path = run_sweep(sweep, session.client, sys.stderr.isatty(),
+                                 options.worker_timeout, session.jobs)
+    except _Stop as stop:
+        _stop_cleanly(sweep, stop.signum)
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     print(summary_text(df, sweep.keys, path))
-    print(f"sweep {sweep.name}: {time.perf_counter() - t0:.1f} s wall")
+    if session.jobs is not None:
+        ids = session.jobs.ids
+        print(f"slurm: {len(ids)} worker jobs submitted for {session.workers} workers "
+              f"({len(ids) - session.workers if len(ids) > session.workers else 0} "
+              f"replacements): {' '.join(ids)}")
+    print(f"sweep {sweep.name}: {time.perf_counter() - t0:.1f} s wall "
+          f"({session.startup_s:.1f} s to the first worker)")
     failed = df[df["status"] != "complete"]
     if len(failed):
         names = "; ".join(f"{r.point} ({r.error})" for r in failed.itertuples())
         raise RunFailed(f"sweep {sweep.name}: {len(failed)} of {len(df)} points failed: {names}")
     return 0
+
+
+def _stop_cleanly(sweep: Sweep, signum: int) -> None:
+    """After the cluster is closed: clear the leftovers of the points killed mid-write, then
+    raise Interrupted (the handler ignores a second signal meanwhile)."""
+    for p in sweep.points:
+        clear_unheld(sweep.log_dir / p.name)
+    name = signal.Signals(signum).name
+    raise Interrupted(f"sweep {sweep.name}: stopped by {name}: queued points cancelled; "
+                      f"{_finished_points(sweep)} of {len(sweep.points)} points have a "
+                      f"finished log in {sweep.log_dir}, which the same command reuses; "
+                      "no table written", signum) from None

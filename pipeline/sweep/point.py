@@ -108,6 +108,28 @@ def remove_stale_temps(folder: Path) -> list[str]:
     return gone
 
 
+def clear_unheld(folder: Path) -> list[str]:
+    """After a stopped sweep: if no live process holds ``folder``'s lock, delete the temporary
+    files a killed writer left and the stale lock file; a point still held (its task runs on
+    a worker that outlives the sweep) is left to its holder. Returns what was deleted."""
+    path = folder / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except FileNotFoundError:
+        return remove_stale_temps(folder) if folder.is_dir() else []
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return []  # held by a live task, or no flock here: not ours to touch
+        gone = remove_stale_temps(folder)
+        with suppress(FileNotFoundError):
+            os.unlink(path)
+        return [*gone, LOCK_NAME]
+    finally:
+        os.close(fd)
+
+
 def figures(analysis: dict | None) -> dict[str, float]:
     out = {}
     for col, path in FIGURES.items():
@@ -116,6 +138,15 @@ def figures(analysis: dict | None) -> dict[str, float]:
             node = node.get(p) if isinstance(node, dict) else None
         out[col] = float(node) if isinstance(node, int | float) else math.nan
     return out
+
+
+def sweep_task(spec: Spec, root: str, topic: str) -> dict:
+    """The task the driver submits: announce the start on ``topic`` (the driver counts
+    retries and running points from it), then ``run_point``."""
+    from pipeline.sweep.progress import announce_start
+
+    announce_start(topic, spec.name)
+    return run_point(spec, root)
 
 
 def run_point(spec: Spec, root: str) -> dict:

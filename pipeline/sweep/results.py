@@ -20,7 +20,7 @@ from pipeline.sweep.point import FIGURES
 
 TABLE_NAME = "sweep.parquet"
 LEAD = ["point"]
-TAIL = ["status", "error", "ran", "analysed", *FIGURES, "n_steps", "seconds", "worker",
+TAIL = ["status", "error", "ran", "analysed", "attempts", *FIGURES, "n_steps", "seconds", "worker",
         "spec_hash", "log"]
 
 
@@ -35,6 +35,7 @@ def make_table(keys: list[str], overrides: list[dict], records: list[dict]) -> p
     df = pd.DataFrame(rows, columns=[*LEAD, *keys, *TAIL])
     for c in FIGURES:
         df[c] = df[c].astype(float)
+    df["attempts"] = df["attempts"].fillna(0).astype(int)
     return df
 
 
@@ -77,11 +78,15 @@ def summary_text(df: pd.DataFrame, keys: list[str], path: Path) -> str:
     lines = ["  ".join(h.ljust(w) for h, w in zip(heads, widths, strict=True))]
     lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     n_fail = int((df["status"] != "complete").sum())
+    n_retried = int((df["attempts"] > 1).sum())
     lines.append(f"{len(df)} points: {len(df) - n_fail} complete, {n_fail} failed; "
                  f"{int((df['ran'] == 'run').sum())} simulated now, {int(cached.sum())} from "
-                 f"cache -> {path}")
+                 f"cache; {n_retried} retried -> {path}")
     for _, row in df[df["status"] != "complete"].iterrows():
         lines.append(f"  failed {row['point']}: {row['error']}")
+    for _, row in df[df["attempts"] > 1].iterrows():
+        lines.append(f"  retried {row['point']}: {int(row['attempts'])} attempts (a worker "
+                     "died or retired while it ran)")
     return "\n".join(lines)
 
 

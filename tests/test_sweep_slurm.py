@@ -1,0 +1,150 @@
+"""Sweeps on a live single-node SLURM (issue 13): ``--slurm`` end to end with the cache, jobs
+reaching their walltime mid-sweep (graceful retirement, and SLURM's hard kill), and a refused
+``sbatch``.
+
+SLURM comes from ``scripts/slurm-local.sh`` (Debian's munge, slurmctld, slurmd on localhost);
+``.ci/run`` and ``make slurm-up`` start it, and the ``slurm_up`` fixture starts it when it is
+installed but down (and stops it again). Without the packages or root the tests skip, saying
+why; under ``CI=true`` such a skip fails the run (tests/conftest.py).
+
+SLURM's walltime is whole minutes, checked by slurmctld about every 30 s, and its kill waits
+``KillWait`` (5 s here) between SIGTERM and SIGKILL: the walltime tests use a 1-minute limit
+and a sweep of about two minutes of work on two one-core jobs, so that every first job ends
+mid-sweep.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from sweep_helpers import sweep, table
+
+from pipeline.spec import PROJECT_ROOT
+
+pytestmark = pytest.mark.slurm
+SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
+# scheduler and workers on the loopback interface: nothing listens beyond localhost
+LOCAL = {"DASK_JOBQUEUE__SLURM__INTERFACE": "lo"}
+
+
+def _status() -> bool:
+    return subprocess.run([str(SCRIPT), "status"], capture_output=True, timeout=30).returncode == 0
+
+
+@pytest.fixture(scope="module")
+def slurm_up():
+    """A running local SLURM, or a skip that says why."""
+    missing = [c for c in ("munged", "slurmctld", "slurmd", "sbatch") if not shutil.which(c)]
+    if missing:
+        pytest.skip(f"SLURM packages missing ({', '.join(missing)} not found): "
+                    "apt-get install munge slurmctld slurmd slurm-client, or make slurm-up")
+    started = False
+    if not _status():
+        if os.geteuid() != 0:
+            pytest.skip("local SLURM not running and not root to start it: make slurm-up as root")
+        r = subprocess.run([str(SCRIPT), "up"], capture_output=True, text=True, timeout=120)
+        if r.returncode != 0:
+            pytest.fail(f"scripts/slurm-local.sh up failed: {r.stderr.strip()}")
+        started = True
+    yield
+    if started:
+        subprocess.run([str(SCRIPT), "down"], capture_output=True, timeout=120)
+
+
+def _jobs(stdout: str) -> list[str]:
+    m = re.search(r"^slurm: (\d+) worker jobs submitted .*?: ?(.*)$", stdout, re.M)
+    assert m, stdout
+    return m.group(2).split()
+
+
+def _job_logs(tmp: Path) -> dict[str, str]:
+    """The worker jobs' stderr files (``breve-sweep-<jobid>.err``), by job id."""
+    return {p.stem.rsplit("-", 1)[1]: p.read_text(errors="replace")
+            for p in (tmp / "logs" / ".slurm").glob("breve-sweep-*.err")}
+
+
+def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
+    args = ["short_nominal", "--set", "mission.duration=1.0", "--set", "mission.dt=0.02,0.03",
+            "--slurm", "--workers", "2"]
+    env = {**LOCAL, "DASK_JOBQUEUE__SLURM__WALLTIME": "00:10:00"}
+    t0 = time.monotonic()
+    r = sweep(tmp_path, *args, timeout=300, **env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    t = table(tmp_path)
+    assert len(t) == 2 and (t["status"] == "complete").all() and t["ran"].all()
+    assert "2 points: 2 complete, 0 failed; 2 simulated now" in r.stdout
+    jobs = _jobs(r.stdout)
+    assert len(jobs) >= 1 and set(_job_logs(tmp_path)) >= set(jobs)  # real SLURM jobs ran
+    # progress off a terminal: one line per change, ending with everything finished
+    assert "sweep s: 2/2 finished (2 done, 0 failed), 0 running" in r.stderr
+    r2 = sweep(tmp_path, *args, timeout=300, **env)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    assert "0 simulated now, 2 from cache" in r2.stdout
+    assert not table(tmp_path)["ran"].any()
+    record_property("wall_s", round(time.monotonic() - t0, 1))
+
+
+def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
+                    ) -> tuple[list[str], dict]:
+    """12 × ``gains`` points on two jobs of a 1-minute walltime: every point must complete
+    although the first jobs end mid-sweep. A point is a 250-s mission at dt ≈ 0.025 s, about
+    2.5 s of work on an idle core (10 000 steps at ~0.25 ms): well below a worker's lifetime
+    even on a loaded host, so that a retiring worker hands back little work."""
+    dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
+    ds = ",".join(f"{1.0 + 0.25 * i:g}" for i in range(gains))
+    t0 = time.monotonic()
+    r = sweep(tmp, "short_nominal", "--set", "mission.duration=250", "--set", f"mission.dt={dts}",
+              "--set", f"controller.gains.cam_ori.D={ds}", "--slurm", "--workers", "2",
+              *lifetime, timeout=900, **LOCAL, DASK_JOBQUEUE__SLURM__WALLTIME="00:01:00")
+    wall = time.monotonic() - t0
+    assert r.returncode == 0, r.stderr[-3000:]
+    t = table(tmp)
+    assert len(t) == 12 * gains and (t["status"] == "complete").all(), \
+        t.loc[t["status"] != "complete", ["point", "error"]]
+    jobs = _jobs(r.stdout)
+    assert len(jobs) > 2, f"no job was replaced: {jobs}"
+    record_property("wall_s", round(wall, 1))
+    record_property("points", len(t))
+    record_property("jobs", len(jobs))
+    record_property("replaced", len(jobs) - 2)
+    record_property("retried_points", int((t["attempts"] > 1).sum()))
+    return jobs, _job_logs(tmp)
+
+
+def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
+    """Worker lifetime 40 ± 3 s (the default for a 1-minute walltime): each worker retires
+    gracefully before SLURM's limit and adapt submits a replacement job."""
+    # 48 points, ~120 s of work, ~60 s on two workers: past the first retirements at ~45 s
+    jobs, logs = _walltime_sweep(tmp_path, 4, [], record_property)
+    assert set(logs) <= set(jobs)
+    assert any("worker-lifetime-reached" in text for text in logs.values()), logs
+    assert not any("DUE TO TIME LIMIT" in text for text in logs.values())
+
+
+def test_slurm_walltime_hard_kill_is_survived(slurm_up, tmp_path, record_property):
+    """No lifetime: SLURM kills the jobs at the walltime (SIGTERM, SIGKILL KillWait s later),
+    mid-task; the points they ran are rescheduled and the killed jobs replaced."""
+    # 96 points, ~240 s of work, ~120 s on two workers: past SLURM's kill 60–95 s after start
+    jobs, logs = _walltime_sweep(tmp_path, 8, ["--lifetime", "0"], record_property)
+    assert set(logs) <= set(jobs)
+    assert any("DUE TO TIME LIMIT" in text for text in logs.values()), logs
+    assert not any("worker-lifetime-reached" in text for text in logs.values())
+
+
+def test_slurm_refused_sbatch_is_exit_2_in_seconds(slurm_up, tmp_path):
+    """An unknown partition: sbatch refuses the worker job, and the sweep ends within 60 s
+    with one line naming sbatch's reason, instead of waiting for workers that never come."""
+    r = sweep(tmp_path, "short_nominal", "--set", "mission.duration=1.0", "--slurm",
+              "--workers", "1", timeout=60, **LOCAL,
+              DASK_JOBQUEUE__SLURM__QUEUE="no_such_partition")
+    assert r.returncode == 2, r.stderr[-3000:]
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("error: --slurm: sbatch refused") and "partition" in lines[0]
+    assert not (tmp_path / "out").exists()
