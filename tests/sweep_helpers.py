@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 from pipeline.sweep.results import read_sweep_table
 
 

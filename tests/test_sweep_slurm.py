@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 from sweep_helpers import sweep, table
 
-from pipeline.spec import PROJECT_ROOT
+from pipeline.paths import PROJECT_ROOT
 
 pytestmark = pytest.mark.slurm
 SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
