@@ -137,8 +137,10 @@ def ensure_report(out_dir: Path, pinned_dir: Path | None = None) -> dict:
     old = current_baselines(Path(out_dir) / "baselines.json", baseline_names(), pinned_dir)
     if old is not None:
         return old
-    print("re-running the baselines", file=sys.stderr)
-    return check(out_dir, pinned_dir)
+    from pipeline.progress import stage
+
+    with stage("baselines", f"({len(baseline_names())} pinned logs re-run)"):
+        return check(out_dir, pinned_dir)
 
 
 def repin(pinned_dir: Path | None = None) -> list[str]:
