@@ -89,10 +89,15 @@ def _run_fresh(name: str, tmp: Path) -> tuple[Path, str]:
 
 def check(out_dir: Path = REPORTS, pinned_dir: Path | None = None) -> dict:
     """Re-run every baseline and compare with its pinned log; write baselines.{json,md}."""
+    from tqdm import tqdm
+
+    from pipeline.progress import interactive
+
     pinned_dir = PINNED if pinned_dir is None else pinned_dir
     results = {}
     with tempfile.TemporaryDirectory(prefix="baselines-") as tmp:
-        for name in baseline_names():
+        for name in tqdm(baseline_names(), disable=not interactive(), unit="log",
+                         desc="baselines", file=sys.stderr, leave=False):
             fresh, spec_hash = _run_fresh(name, Path(tmp))
             pinned = Path(pinned_dir) / name / "run.parquet"
             entry = {"pinned": display_path(pinned), "spec_hash": spec_hash}
