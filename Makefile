@@ -35,16 +35,16 @@ all: $(STAMP)
 ## setup: create .venv and install the pinned versions of constraints.txt
 setup: $(STAMP)
 
-# Said as it happens (pip itself stays quiet). The venv's own pip installs: no upgrade of pip
-# first, and no byte-compiling of every installed module (--no-compile; Python compiles the
-# few it imports on first use), which together halve the set-up.
+# Said as it happens (pip itself stays quiet). The venv's own pip installs, without upgrading
+# pip first. (Not --no-compile: where PYTHONDONTWRITEBYTECODE is set, nothing would ever be
+# byte-compiled and every later command would pay for it.)
 $(STAMP): pyproject.toml constraints.txt
 	@t0=$$(date +%s); \
 	echo "setup: creating $(VENV) ($$($(PYTHON) --version 2>&1))" >&2; \
 	$(PYTHON) -m venv $(VENV) || exit $$?; \
 	echo "setup: installing the pinned packages of constraints.txt into $(VENV)" \
 		"(pip, about a minute; once)" >&2; \
-	$(PY) -m pip install --quiet --no-compile -c constraints.txt -e ".[dev,slurm]" || exit $$?; \
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,slurm]" || exit $$?; \
 	touch $@; echo "setup: done in $$(( $$(date +%s) - t0 )) s" >&2
 
 ## compile: compile the Numba kernels once, on two cores (make all does it first)
