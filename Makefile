@@ -10,8 +10,8 @@ REPORTS := generated_reports
 MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 
-.PHONY: help all setup lock runs analyses report claims claims-ci test lint sweep bench baselines repin clean \
-	slurm-up slurm-down
+.PHONY: help all setup compile lock runs analyses report claims claims-ci test lint sweep bench
+.PHONY: baselines repin clean slurm-up slurm-down
 
 .DEFAULT_GOAL := all
 
@@ -20,23 +20,37 @@ help:
 	@awk '/^## [a-z-]+: / { sub(/^## /, ""); split($$0, a, ": "); \
 		printf "  make %-10s %s\n", a[1], substr($$0, length(a[1]) + 3) }' $(firstword $(MAKEFILE_LIST))
 
-# The claims first (they run what is missing, the sweeps included), then the reports, which
-# link the register; the reports are rendered even when a claim fails, and the recipe then
-# ends with the claims' own code (1: make prints "Error 1"; GNU make itself exits 2 whenever a
-# recipe fails, its only code for that).
-## all: set-up, missions, analyses, sweeps, claims and every report (generated_reports/index.html)
+# The kernels compiled once, on both cores (a no-op once done); the claims (they run what is
+# missing, the sweeps included; each mission, analysis and sweep is a stage of its own on
+# stderr); then the reports, which link the register: the claims made every log and analysis
+# they read, so `report` is called directly, not through `make report`'s prerequisites. The
+# reports are rendered even when a claim fails, and the recipe then ends with the claims' own
+# code (1: make prints "Error 1"; GNU make itself exits 2 whenever a recipe fails, its only
+# code for that).
+## all: set-up, compile, missions, analyses, sweeps, claims and every report (generated_reports/index.html)
 all: $(STAMP)
-	@$(PY) -m pipeline claims --claims claims --out $(REPORTS); rc=$$?; \
-	$(MAKE) --no-print-directory report || exit $$?; exit $$rc
+	@$(PY) -m pipeline compile || exit $$?; \
+	$(PY) -m pipeline claims --claims claims --out $(REPORTS); rc=$$?; \
+	$(PY) -m pipeline report --out $(REPORTS) || exit $$?; exit $$rc
 
 ## setup: create .venv and install the pinned versions of constraints.txt
 setup: $(STAMP)
 
+# Said as it happens (pip itself stays quiet). The venv's own pip installs, without upgrading
+# pip first. (Not --no-compile: where PYTHONDONTWRITEBYTECODE is set, nothing would ever be
+# byte-compiled and every later command would pay for it.)
 $(STAMP): pyproject.toml constraints.txt
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,slurm]"
-	touch $@
+	@t0=$$(date +%s); \
+	echo "setup: creating $(VENV) ($$($(PYTHON) --version 2>&1))" >&2; \
+	$(PYTHON) -m venv $(VENV) || exit $$?; \
+	echo "setup: installing the pinned packages of constraints.txt into $(VENV)" \
+		"(pip, about a minute; once)" >&2; \
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,slurm]" || exit $$?; \
+	touch $@; echo "setup: done in $$(( $$(date +%s) - t0 )) s" >&2
+
+## compile: compile the Numba kernels once, on two cores (make all does it first)
+compile: $(STAMP)
+	$(PY) -m pipeline compile
 
 # Refresh the pinned versions: a throw-away venv, the ranges of pyproject.toml, pip freeze.
 # Deliberate: run `make baselines` after it, and re-pin only with a reason.

@@ -21,6 +21,7 @@ def _cmd_validate(a: argparse.Namespace) -> int:
 
 def _cmd_run(a: argparse.Namespace) -> int:
     from pipeline.paths import display_path
+    from pipeline.progress import interactive, stage
     from pipeline.provenance.validity import current_log
     from pipeline.sim.run import log_path, run_spec
     from pipeline.spec import load_spec
@@ -36,7 +37,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
                 raise RunFailed(f"{spec.name}: run {meta.status} at {meta.error}; log marked "
                                 f"{meta.status}: {display_path(path)}")
             continue
-        out = run_spec(spec, a.out, progress=sys.stderr.isatty())
+        with stage(f"mission {spec.name}", f"({spec.n_steps} steps) -> {display_path(path)}"):
+            out = run_spec(spec, a.out, progress=interactive())
         for w in out.warnings:
             print(f"warning: {w}", file=sys.stderr)
         print(f"{spec.name}: {out.n_steps} steps, {out.status} -> {display_path(out.path)}")
@@ -63,19 +65,34 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
 
 
 def _cmd_report(a: argparse.Namespace) -> int:
+    from pipeline.progress import stage
+    from pipeline.provenance.validity import REPORT_KEY_FILE, current_report
+
+    out = Path(a.out)
+    # Current reports are said so before the renderer (matplotlib, the figures) is imported:
+    # the second `make all` should take seconds.
+    if not a.force and out.is_dir() and current_report(out, out / REPORT_KEY_FILE):
+        print(f"report: up to date (same inputs and renderer) -> {out / 'index.html'}")
+        return 0
     from pipeline.reports.render import render_all
 
-    render_all(Path(a.out), force=a.force)
+    with stage("report", f"-> {a.out}"):
+        render_all(out, force=a.force)
     return 0
 
 
 def _cmd_claims(a: argparse.Namespace) -> int:
     from pipeline.claims.evaluate import run_claims, summary_lines
     from pipeline.paths import display_path
+    from pipeline.progress import stage
     from pipeline.reports.claims_page import render_claims
 
-    outcome = run_claims(a.claims, Path(a.out))
-    page = render_claims(outcome, Path(a.out))
+    # Runs, analyses, sweeps and checks are stages of their own, as they start.
+    with stage("claims", f"({a.claims}: what is missing is made first)") as st:
+        outcome = run_claims(a.claims, Path(a.out))
+        page = render_claims(outcome, Path(a.out))
+        st.done(", ".join(f"{outcome.count(k)} {k}" for k in ("PASS", "FAIL", "OPEN", "NOW HOLDS")
+                          if outcome.count(k)))
     for line in summary_lines(outcome):
         print(line)
     for r in outcome.results:
@@ -92,6 +109,12 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
     from pipeline.sweep import sweep_command
 
     return sweep_command(a)
+
+
+def _cmd_compile(a: argparse.Namespace) -> int:
+    from pipeline.compile import compile_command
+
+    return compile_command(a)
 
 
 def _cmd_bench(a: argparse.Namespace) -> int:
@@ -232,6 +255,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="table folder; writes DIR/<sweep>/sweep.parquet "
                    "(default: generated_reports/sweeps; e.g. --out /tmp/sweeps)")
     s.set_defaults(func=_cmd_sweep)
+
+    k = _stage(sub, "compile", "compile the Numba kernels into their cache once, on two cores "
+               "(every stage also compiles what it needs on first use)", "--processes 2")
+    k.add_argument("--processes", type=int, default=2, metavar="N",
+                   help="1: one process; 2: two processes compiling disjoint kernels "
+                   "(default: 2; e.g. --processes 1)")
+    k.set_defaults(func=_cmd_compile)
 
     b = _stage(sub, "bench", "measure simulator and analysis cost against the Pinocchio floor",
                "--quick")

@@ -20,6 +20,7 @@ from pipeline.analysis.stages import analyze_log, compare
 from pipeline.errors import RunFailed
 from pipeline.logs import LogMeta, verify_log
 from pipeline.paths import display_path
+from pipeline.progress import interactive, stage
 from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.provenance.validity import current_analysis, current_log, current_sweep
 from pipeline.sim.run import log_path, run_spec
@@ -45,8 +46,9 @@ def ensure_run(spec: Spec, logs_dir: Path, expect: str = "complete") -> RunRecor
     if meta is not None and meta.status == expect:
         log = verify_log(path)
         return RunRecord(log.spec, path, log.meta, True)
-    print(f"running {spec.name} ({spec.n_steps} steps) -> {display_path(path)}", file=sys.stderr)
-    out = run_spec(spec, logs_dir, progress=sys.stderr.isatty(), raise_on_failure=False)
+    with stage(f"mission {spec.name}", f"({spec.n_steps} steps) -> {display_path(path)}") as st:
+        out = run_spec(spec, logs_dir, progress=interactive(), raise_on_failure=False)
+        st.done(out.status)
     if out.status != expect:
         raise RunFailed(f"{spec.name}: expected a {expect} run, got {out.status}"
                         + (f" at {out.error}" if out.error else "") + f"; log: {out.path}")
@@ -64,13 +66,13 @@ def ensure_analysis(run: RunRecord, out_dir: Path, against: RunRecord | None = N
                            None if against is None else (against.path, against.meta))
     if old is not None:
         return old
-    print(f"analysing {run.spec.name}" + (f" against {against.spec.name}" if against else ""),
-          file=sys.stderr)
-    record = analyze_log(run.path)
-    if against is not None:
-        other = against_record if against_record is not None else analyze_log(against.path)
-        record["comparison"] = compare(record, other)
-    write_analysis(record, out_dir)
+    with stage(f"analysis {run.spec.name}",
+               f"(against {against.spec.name})" if against is not None else ""):
+        record = analyze_log(run.path)
+        if against is not None:
+            other = against_record if against_record is not None else analyze_log(against.path)
+            record["comparison"] = compare(record, other)
+        write_analysis(record, out_dir)
     return record
 
 
@@ -88,11 +90,13 @@ def ensure_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
                "--logs", str(logs), "--out", str(out), "--workers", str(workers)]
         for s in sets:
             cmd += ["--set", s]
-        print(f"running sweep {name} ({len(plan.points)} points)", file=sys.stderr)
-        r = subprocess.run(cmd, stdout=sys.stderr, stderr=subprocess.PIPE, text=True)
-        if r.returncode != 0:
-            last = (r.stderr.strip().splitlines() or ["no message"])[-1]
-            raise RunFailed(f"sweep {name} failed (exit {r.returncode}): {last}")
+        # Its stderr is ours: on a terminal the sweep draws its own bar, and its one-line
+        # error, if any, shows above the failure.
+        with stage(f"sweep {name}", f"({len(plan.points)} points, {workers} workers)"):
+            r = subprocess.run(cmd, stdout=sys.stderr)
+            if r.returncode != 0:
+                raise RunFailed(f"sweep {name} failed (exit {r.returncode}); its message is "
+                                f"above")
     bracket = stability_bracket(plan.table_path, key, lag, predicted, unstable)
     prov = {"source": "sweep", "version": f"sim {sim_version()}, analysis {analysis_version()}",
             "file": display_path(plan.table_path)}

@@ -68,7 +68,7 @@ def test_the_cycle_finder_finds_a_cycle():
 # only units of its own layer or below. Data flows up: sim writes logs, analysis reads them,
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
-    ("errors", "paths", "yamlfile", "version", "provenance.keys", "provenance"),
+    ("errors", "paths", "yamlfile", "version", "progress", "provenance.keys", "provenance"),
     ("spec", "budget"),
     ("logs",),
     ("sim",),
@@ -77,7 +77,7 @@ LAYERS = (
     ("orchestrate",),
     ("claims",),
     ("reports",),
-    ("bench", "validate", "cli", "__main__"),
+    ("bench", "validate", "compile", "cli", "__main__"),
 )
 RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 

@@ -288,7 +288,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
     M_b = T.reduced_inertia
     J_x = theory.task_jacobian(row["x_tilde"][0], T.R_te)
     K_x = J_x.T @ K + theory.posture_stiffness(T.gamma_inv, spec.controller.gains.posture, J_x)
-    mu = theory.damping_rates(M_b, D)
+    mu = theory.damping_rates(np.ascontiguousarray(M_b), D)  # the step kernel's layout
     dt, integ = spec.mission.dt, spec.controller.integrator
     maps = {i: theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, i))
             for i in ("explicit", "imex")}

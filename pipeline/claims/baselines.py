@@ -89,10 +89,15 @@ def _run_fresh(name: str, tmp: Path) -> tuple[Path, str]:
 
 def check(out_dir: Path = REPORTS, pinned_dir: Path | None = None) -> dict:
     """Re-run every baseline and compare with its pinned log; write baselines.{json,md}."""
+    from tqdm import tqdm
+
+    from pipeline.progress import interactive
+
     pinned_dir = PINNED if pinned_dir is None else pinned_dir
     results = {}
     with tempfile.TemporaryDirectory(prefix="baselines-") as tmp:
-        for name in baseline_names():
+        for name in tqdm(baseline_names(), disable=not interactive(), unit="log",
+                         desc="baselines", file=sys.stderr, leave=False):
             fresh, spec_hash = _run_fresh(name, Path(tmp))
             pinned = Path(pinned_dir) / name / "run.parquet"
             entry = {"pinned": display_path(pinned), "spec_hash": spec_hash}
@@ -137,8 +142,10 @@ def ensure_report(out_dir: Path, pinned_dir: Path | None = None) -> dict:
     old = current_baselines(Path(out_dir) / "baselines.json", baseline_names(), pinned_dir)
     if old is not None:
         return old
-    print("re-running the baselines", file=sys.stderr)
-    return check(out_dir, pinned_dir)
+    from pipeline.progress import stage
+
+    with stage("baselines", f"({len(baseline_names())} pinned logs re-run)"):
+        return check(out_dir, pinned_dir)
 
 
 def repin(pinned_dir: Path | None = None) -> list[str]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -137,11 +136,12 @@ class Context:
 
     def cross_check(self) -> dict:
         if self._cross is None:
+            from pipeline.progress import stage
             from pipeline.verify.cross_check import build_cross_check, write_cross_check_json
 
-            print("cross-checking equations against code", file=sys.stderr)
-            cc = build_cross_check()
-            write_cross_check_json(self.out, cc)
+            with stage("cross-check", "(equations against code)"):
+                cc = build_cross_check()
+                write_cross_check_json(self.out, cc)
             self._cross = {**cc.summary(), "source_version": cc.source_version}
         return self._cross
 

@@ -109,6 +109,9 @@ def report_key(out: Path) -> str:
     return json.dumps({"report_version": report_version(), "inputs": parts}, sort_keys=True)
 
 
+REPORT_KEY_FILE = ".report-key"  # in a report folder: the key of its last complete rendering
+
+
 def current_report(out: Path, stamp: Path) -> bool:
     """Whether the reports under ``out`` were rendered from these inputs by this code."""
     try:

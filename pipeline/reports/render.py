@@ -21,13 +21,13 @@ from pipeline.claims.register import CLAIMS_SCHEMA
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text, read_meta
 from pipeline.provenance.keys import report_version
-from pipeline.provenance.validity import current_report, report_key
+from pipeline.provenance.validity import REPORT_KEY_FILE, current_report, report_key
 from pipeline.reports import figures as fg
 from pipeline.reports.mechanism import mechanism_context
 from pipeline.reports.templating import render
 from pipeline.verify.cross_check import CrossCheck, build_cross_check, write_cross_check_json
 
-KEY_FILE = ".report-key"  # the key of the last complete rendering
+KEY_FILE = REPORT_KEY_FILE  # the key of the last complete rendering
 
 
 def _log_of(record: dict) -> Path | None:

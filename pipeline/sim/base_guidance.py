@@ -88,8 +88,10 @@ def references(tau, p_b, use_p_b, g):
     p_c, v_c, a_c = orbit(tau, g[GUIDANCE_AT.phase], g[GUIDANCE_AT.radius],
                           g[GUIDANCE_AT.omega])
     R_b, p_e, R_e, aim = poses(tau, p_b, use_p_b, g)
-    R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, False, g)
-    R_bm, p_em, R_em, _ = poses(tau - h, p_b, False, g)
+    # False as a boolean, not the literal False: one compiled specialisation of poses.
+    orbit_based = use_p_b and not use_p_b
+    R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, orbit_based, g)
+    R_bm, p_em, R_em, _ = poses(tau - h, p_b, orbit_based, g)
     w_b = vee((R_bp - R_bm) / (2 * h) @ np.ascontiguousarray(R_b.T))
     w_e = vee((R_ep - R_em) / (2 * h) @ np.ascontiguousarray(R_e.T))
     return Reference(p_c=p_c, v_c=v_c, a_c=a_c, R_b=R_b, w_b=w_b, p_e=p_e,

@@ -130,7 +130,9 @@ class Mission:
         K, D = block_gains(ctrl, gamma)
         K_x = J_x.T @ K + posture_stiffness(T.gamma_inv, ctrl.gains.posture, J_x)
         M = T.reduced_inertia
-        mu_max = float(damping_rates(M, D)[-1])
+        # C-ordered, as the step kernel passes it: one compiled specialisation (the kernel
+        # makes the same contiguous copy itself).
+        mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
         return critical_step(mu_max), bisect_critical_step(M, D, K_x, J_x, ctrl.integrator)
 
     def controller_vector(self) -> np.ndarray:

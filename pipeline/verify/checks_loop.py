@@ -85,7 +85,10 @@ def _com_coupling() -> Outcome:
 
     d = _loop_inputs(4)
     ref = -_rows(d["C_c"], d["xc"]) - _rows(d["D"], _rows(d["G_vc"], d["xc"]))
-    got = bc.com_coupling_term(d["C_c"], d["D"], d["G_vc"], d["xc"])
+    # C_c as a view of a wider matrix, as the step kernel passes Ĉ[3:, :3]: one compiled
+    # specialisation of the term
+    C_c = np.hstack([d["C_c"], np.zeros((9, 9))])[:, :3]
+    got = bc.com_coupling_term(C_c, d["D"], d["G_vc"], d["xc"])
     return Outcome(_TERM_TEXT.format(s=4), maxdiff(got, ref), 1e-12)
 
 
@@ -221,7 +224,8 @@ def _saturate() -> Outcome:
     for scale in (0.01, 1.0, 100.0):
         x = scale * g.standard_normal(9)
         for kind in ("acc", "rate"):
-            out, hit = saturate_blocks(x, breve_bounds(lim, kind))
+            # a writable copy, as the step kernel's bounds: one compiled specialisation
+            out, hit = saturate_blocks(x, breve_bounds(lim, kind).copy())
             for j, name in enumerate(("omega_b", "nu_e_lin", "nu_e_ang")):
                 b, blk = getattr(lim, f"{name}_{kind}"), x[3 * j:3 * j + 3]
                 n = float(np.linalg.norm(blk))
