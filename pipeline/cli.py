@@ -23,10 +23,15 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from pipeline.paths import display_path
     from pipeline.progress import interactive, stage
     from pipeline.provenance.validity import current_log
+    from pipeline.sim.robot_file import load_robot_model
     from pipeline.sim.run import log_path, run_spec
     from pipeline.spec import load_spec
 
-    specs = [load_spec(s) for s in a.spec]  # every spec checked before anything runs
+    # Every spec and its robot file checked before anything runs or prints: bad input is
+    # one line (exit 2), not a stage that started and failed.
+    specs = [load_spec(s) for s in a.spec]
+    for spec in specs:
+        load_robot_model(spec.robot_path, spec.robot.camera_frame, spec.robot.bus_inertia_scale)
     for spec in specs:
         path = log_path(spec, Path(a.out))
         meta = None if a.force else current_log(path, spec)
@@ -83,10 +88,13 @@ def _cmd_report(a: argparse.Namespace) -> int:
 
 def _cmd_claims(a: argparse.Namespace) -> int:
     from pipeline.claims.evaluate import run_claims, summary_lines
+    from pipeline.claims.register import load_claims
     from pipeline.paths import display_path
     from pipeline.progress import stage
     from pipeline.reports.claims_page import render_claims
+    from pipeline.spec import resolve_spec_path
 
+    load_claims(resolve_spec_path(a.claims))  # a bad register is one line, before any stage
     # Runs, analyses, sweeps and checks are stages of their own, as they start.
     with stage("claims", f"({a.claims}: what is missing is made first)") as st:
         outcome = run_claims(a.claims, Path(a.out))

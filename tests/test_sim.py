@@ -470,8 +470,12 @@ def test_diverging_spec_fails_via_cli_with_exit_1(tmp_path):
     res = run_cli("run", str(tmp_path / "diverge.yaml"), "--out", str(out))
     assert res.returncode == 1, res.stderr
     lines = res.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.stderr
-    assert "diverge" in lines[0] and "failed" in lines[0]
+    # the run's own progress lines, then one error line
+    assert lines[:-1] == ["mission diverge: started (40 steps) -> "
+                          f"{out / 'diverge' / 'run.parquet'}",
+                          lines[1]] and lines[1].startswith("mission diverge: failed after "), lines
+    assert lines[-1].startswith("error: ") and "Traceback" not in res.stderr
+    assert "diverge" in lines[-1] and "failed" in lines[-1]
     log = out / "diverge" / "run.parquet"
     meta = read_meta(log)
     assert meta.status == "failed"
