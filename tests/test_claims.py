@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -11,19 +12,20 @@ import yaml
 from report_fixtures import built, run_cli
 
 from pipeline.claims.evaluate import compare_values, dig
-from pipeline.claims.register import OPERATORS, load_claims
+from pipeline.claims.register import OPERATORS, load_claims, register_sources
 from pipeline.errors import SpecError
 from pipeline.logs import read_meta
 from pipeline.paths import SHIPPED_SPECS
 
 
-def claims_file(tmp_path: Path, claims: list[dict], runs: dict | None = None) -> Path:
-    """A claims file on the shared 4-second test runs."""
+def claims_file(tmp_path: Path, claims: list[dict], runs: dict | None = None,
+                logs: Path | None = None) -> Path:
+    """A claims file on the shared 4-second test runs (or on ``logs``)."""
     b = built()
     default_runs = {"nominal": {"spec": str(b.spec_file("t_nominal")), "against": "dt010"},
                     "dt010": {"spec": str(b.spec_file("t_dt010"))}}
     path = tmp_path / "claims.yaml"
-    path.write_text(yaml.safe_dump({"logs": str(b.logs), "runs": runs or default_runs,
+    path.write_text(yaml.safe_dump({"logs": str(logs or b.logs), "runs": runs or default_runs,
                                     "claims": claims}, allow_unicode=True))
     return path
 
@@ -96,6 +98,61 @@ def test_open_claims_are_listed_and_a_holding_one_asks_for_promotion(tmp_path):
     assert "claim O2 now holds: promote" in r.stderr
     data = json.loads((tmp_path / "out" / "claims.json").read_text())
     assert data["claims"][0]["status"] == "NOW HOLDS"
+
+
+def test_a_current_register_is_reused_with_the_same_lines_and_exit_code(tmp_path):
+    path = claims_file(tmp_path, [claim("R1", "nominal:dominant.lag1", "lt", -0.5),
+                                  claim("R2", "nominal:dominant.lag1", "lt", -2.0)])
+    first = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    again = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert first.returncode == again.returncode == 1, again.stderr
+    assert "claims: started" in first.stderr and "claims: started" not in again.stderr
+    assert "claims: up to date (1 PASS, 1 FAIL;" in again.stderr
+    assert again.stdout == first.stdout and "R1 PASS" in again.stdout
+    assert "claim R2 fails" in again.stderr
+    forced = run_cli("claims", "--claims", path, "--out", tmp_path / "out", "--force")
+    assert "claims: started" in forced.stderr and forced.stdout == first.stdout
+
+
+@pytest.mark.parametrize("victim", ["log", "analysis", "claims.json", "CLAIMS.md", "key"])
+def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
+    b = built()
+    logs = tmp_path / "logs"  # a copy: the shared test runs stay whole
+    for name in ("t_nominal", "t_dt010"):
+        shutil.copytree(b.logs / name, logs / name)
+    path = claims_file(tmp_path, [claim("R3", "nominal:dominant.lag1", "lt", -0.5)], logs=logs)
+    out = tmp_path / "out"
+    first = run_cli("claims", "--claims", path, "--out", out)
+    assert first.returncode == 0, first.stderr
+    target = {"log": logs / "t_nominal" / "run.parquet",
+              "analysis": out / "t_nominal" / "analysis.json", "claims.json": out / "claims.json",
+              "CLAIMS.md": out / "CLAIMS.md", "key": out / ".claims-key"}[victim]
+    with target.open("ab") as f:
+        f.write(b" ")  # one byte more (JSON stays valid JSON)
+    r = run_cli("claims", "--claims", path, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "claims: started" in r.stderr and "up to date" not in r.stderr
+    assert r.stdout == first.stdout
+    assert "up to date" in run_cli("claims", "--claims", path, "--out", out).stderr
+
+
+def test_the_claims_key_follows_the_specs_the_register_finds(tmp_path):
+    """A spec of the same name put beside the register is the one an evaluation would run:
+    the key's sources change with it (and with the register's content)."""
+    path = tmp_path / "claims.yaml"
+    register = {"runs": {"nominal": {"spec": "nominal"}},
+                "claims": [claim("S1", "nominal:dominant.lag1", "lt", -0.5)]}
+    path.write_text(yaml.safe_dump(register))
+    before = register_sources(load_claims(path))
+    assert before == register_sources(load_claims(path))
+    spec = yaml.safe_load((SHIPPED_SPECS / "nominal.yaml").read_text())
+    spec["mission"]["duration"] = 1.0
+    (tmp_path / "nominal.yaml").write_text(yaml.safe_dump(spec))
+    shadowed = register_sources(load_claims(path))
+    assert shadowed["run nominal"] != before["run nominal"]
+    register["claims"][0]["checks"][0]["threshold"] = -0.6
+    path.write_text(yaml.safe_dump(register))
+    assert register_sources(load_claims(path))["register"] != shadowed["register"]
 
 
 def test_open_claim_without_a_reason_is_rejected(tmp_path):

@@ -9,7 +9,6 @@ NOW HOLDS (an ``open`` claim that holds: like a strict xfail, exit 1 until it is
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.analysis.record import RECORD_NAME
 from pipeline.analysis.signals import lag1_autocorrelation
+from pipeline.claims.record import write_claims_json
 from pipeline.claims.register import (
-    CLAIMS_SCHEMA,
     LOG_GROUPS,
     OPERATORS,
     Claim,
@@ -31,7 +31,7 @@ from pipeline.claims.register import (
     split_metric,
 )
 from pipeline.errors import SpecError
-from pipeline.logs import atomic_write_text, read_columns
+from pipeline.logs import read_columns
 from pipeline.orchestrate import RunRecord, ensure_analysis, ensure_run
 from pipeline.paths import display_path
 from pipeline.provenance.keys import source_version
@@ -111,6 +111,9 @@ class Context:
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._note = None
+        # Every artefact read or made, in order: with the outputs, the claims' key
+        # (pipeline.provenance.validity.current_claims).
+        self.files: list[Path] = []
 
     def _spec(self, name: str):
         return load_spec(self.cf.runs[name].spec, self.here)
@@ -118,11 +121,13 @@ class Context:
     def prepare(self) -> None:
         for name in needed_runs(self.cf):
             self.runs[name] = ensure_run(self._spec(name), self.logs, self.cf.runs[name].expect)
+            self.files.append(self.runs[name].path)
         for name in needed_runs(self.cf):
             dep = self.cf.runs[name].against
             self.analyses[name] = ensure_analysis(
                 self.runs[name], self.out, self.runs.get(dep),
                 self.analyses.get(dep) if dep else None)
+            self.files.append(self.out / self.runs[name].spec.name / RECORD_NAME)
 
     def note(self):
         """The seed note's published values (the claims file's ``note:``), or None."""
@@ -138,18 +143,22 @@ class Context:
         if self._cross is None:
             from pipeline.progress import stage
             from pipeline.verify.cross_check import build_cross_check, write_cross_check_json
+            from pipeline.verify.sources import EQUATIONS_MD
 
             with stage("cross-check", "(equations against code)"):
                 cc = build_cross_check()
-                write_cross_check_json(self.out, cc)
+                self.files.append(write_cross_check_json(self.out, cc))
+            self.files += [EQUATIONS_MD] if EQUATIONS_MD.is_file() else []
             self._cross = {**cc.summary(), "source_version": cc.source_version}
         return self._cross
 
     def baselines(self) -> dict:
         if self._baselines is None:
-            from pipeline.claims.baselines import ensure_report
+            from pipeline.claims.baselines import PINNED, baseline_names, ensure_report
 
             self._baselines = ensure_report(self.out)
+            self.files += [self.out / "baselines.json",
+                           *(PINNED / n / "run.parquet" for n in baseline_names())]
         return self._baselines
 
     def sweep(self, alias: str) -> tuple[dict, dict]:
@@ -161,6 +170,7 @@ class Context:
             self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
                                                self.out / "sweeps", ref.workers, ref.key,
                                                ref.lag, ref.predicted, ref.unstable)
+            self.files.append(Path(self._sweeps[alias][1]["file"]))  # the sweep's table
         return self._sweeps[alias]
 
     def value(self, metric: str) -> tuple[Any, dict]:
@@ -241,12 +251,6 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
     return out
 
 
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    return x
-
-
 def seed_table(ctx: Context) -> list:
     """The note's evidence table beside the claims' runs of its columns (by run name)."""
     from pipeline.claims.seed_note import COLUMNS, note_table
@@ -266,31 +270,10 @@ class ClaimsOutcome:
     note_rows: list
     source_version: str
     record: Path  # claims.json
+    files: tuple[Path, ...]  # every artefact the evaluation read or made (Context.files)
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
-
-    @property
-    def exit_code(self) -> int:
-        """1 if a hold claim fails or an open claim now holds, else 0."""
-        return 1 if self.count("FAIL") or self.count("NOW HOLDS") else 0
-
-
-def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
-                      version: str) -> Path:
-    path = Path(out_dir) / "claims.json"
-    data = {"schema": CLAIMS_SCHEMA, "claims_file": display_path(cf.source),
-            "source_version": version,
-            "claims": [{"id": r.claim.id, "statement": r.claim.statement,
-                        "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
-                        "checks": [{"metric": c.check.metric, "op": c.check.op,
-                                    "rel_tol": c.check.rel_tol,
-                                    "value": _jsonable(c.value),
-                                    "threshold": _jsonable(c.threshold), "ok": c.ok}
-                                   for c in r.checks],
-                        "provenance": r.provenance} for r in results]}
-    atomic_write_text(path, json.dumps(data, indent=1, default=str))
-    return path
 
 
 def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
@@ -302,18 +285,5 @@ def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
     results = evaluate(cf, ctx)
     version = source_version()
     path = write_claims_json(results, cf, out, version)
-    return ClaimsOutcome(cf, results, seed_table(ctx), version, path)
+    return ClaimsOutcome(cf, results, seed_table(ctx), version, path, tuple(ctx.files))
 
-
-def summary_lines(outcome: ClaimsOutcome) -> list[str]:
-    """One line per claim: its status and each check's value against its threshold."""
-    return [f"{r.claim.id:>4} {r.status:<9} " + "; ".join(
-        f"{c.check.metric} = {_short(c.value)} ({c.symbol} {_short(c.threshold)})"
-        for c in r.checks) for r in outcome.results]
-
-
-def _short(x: Any) -> str:
-    if isinstance(x, float):
-        return f"{x:.4g}"
-    s = json.dumps(x, default=str) if isinstance(x, (dict, list)) else str(x)
-    return s if len(s) <= 60 else s[:57] + "..."

@@ -255,3 +255,25 @@ def needed_runs(cf: ClaimsFile) -> list[str]:
         if dep is not None and dep not in used:
             used.append(dep)
     return sorted(used, key=lambda n: cf.runs[n].against is not None)
+
+
+def register_sources(cf: ClaimsFile) -> dict[str, str]:
+    """What an evaluation of ``cf`` is made from, each by hash: the register's content
+    (``extends`` merged), its note file, and each run's and sweep's spec (its content, as the
+    evaluation finds it on the search path, ``extends`` merged) with its robot file. With the
+    bytes of every artefact the evaluation read and wrote, this is the claims' key
+    (:func:`pipeline.provenance.validity.current_claims`)."""
+    import hashlib
+
+    from pipeline.provenance.keys import file_digest
+    from pipeline.spec import load_spec
+
+    here = Path(cf.source).resolve().parent
+    out = {"register": hashlib.sha256(cf.model_dump_json().encode()).hexdigest()}
+    if cf.note is not None:
+        out["note"] = file_digest(note_path(cf, cf.source))
+    for kind, refs in (("run", cf.runs), ("sweep", cf.sweeps)):
+        for name, ref in refs.items():
+            spec = load_spec(ref.spec, here)
+            out[f"{kind} {name}"] = f"spec {spec.spec_hash}, robot {file_digest(spec.robot_path)}"
+    return out

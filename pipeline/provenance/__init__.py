@@ -16,6 +16,9 @@ sweep       its grid (base spec hash, point names), every point complete, and th
             simulator's and analysis' versions its points were made with
 report      its inputs (the analysis records, claims, sweep tables, bench and baselines
             files) and the renderer's sources, templates and plotting libraries
+claims      the register's content, its specs (found as an evaluation would find them) and
+            robots, every source of the package, the libraries, and the bytes of every file
+            its last evaluation read or wrote (logs, analyses, tables, claims.json, pages)
 ==========  ===============================================================================
 
 So editing a report template re-renders the reports and nothing else, and an upgrade of NumPy

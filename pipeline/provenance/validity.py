@@ -16,7 +16,17 @@ import pyarrow.parquet as pq
 from pipeline.analysis.record import try_read_analysis
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, num_rows, read_meta
-from pipeline.provenance.keys import analysis_version, file_digest, report_version, sim_version
+from pipeline.provenance.keys import (
+    ANALYSIS_LIBRARIES,
+    REPORT_LIBRARIES,
+    SIM_LIBRARIES,
+    analysis_version,
+    file_digest,
+    library_versions,
+    report_version,
+    sim_version,
+    source_version,
+)
 from pipeline.spec import Spec
 
 FINISHED = ("complete", "failed", "diverged")  # a run that ended (a failed one fails again)
@@ -117,4 +127,33 @@ def current_report(out: Path, stamp: Path) -> bool:
     try:
         return Path(stamp).read_text() == report_key(out)
     except OSError:
+        return False
+
+
+CLAIMS_KEY_FILE = ".claims-key"  # in a report folder: the key of its last claims evaluation
+
+
+def claims_key(sources: dict[str, str], files: Iterable[Path]) -> str:
+    """The key of an evaluated register: what it is made from (``sources``: the register,
+    its specs and robots, :func:`pipeline.claims.register.register_sources`), the bytes of
+    every artefact the evaluation read or wrote (logs, analyses, sweep tables, baselines, the
+    cross-check and equations, claims.json and the CLAIMS pages), the package's sources (the
+    cross-check inspects them all) and the libraries."""
+    libraries = library_versions(dict.fromkeys(SIM_LIBRARIES + ANALYSIS_LIBRARIES
+                                               + REPORT_LIBRARIES))
+    return json.dumps({"source_version": source_version(), "libraries": libraries,
+                       "sources": sources,
+                       "files": {str(Path(p).resolve()): file_digest(p) for p in files}},
+                      sort_keys=True, indent=1)
+
+
+def current_claims(stamp: Path, sources: dict[str, str]) -> bool:
+    """Whether the claims beside ``stamp`` were evaluated from these sources, by this code,
+    and every file that evaluation read or wrote is still byte for byte as it left it (a
+    file that is gone or changed, or a stamp that cannot be read: not current)."""
+    try:
+        text = Path(stamp).read_text()
+        files = [Path(p) for p in json.loads(text)["files"]]
+        return text == claims_key(sources, files)
+    except (OSError, KeyError, json.JSONDecodeError, TypeError, AttributeError):
         return False

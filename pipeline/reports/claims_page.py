@@ -5,11 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.claims.evaluate import ClaimsOutcome
+from pipeline.claims.record import STATUSES
 from pipeline.claims.seed_note import fmt
 from pipeline.paths import display_path
 from pipeline.reports.templating import render
-
-STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
 
 
 def render_claims(outcome: ClaimsOutcome, out_dir: Path) -> Path:

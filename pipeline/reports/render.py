@@ -11,13 +11,12 @@ current_report`: the same inputs, renderer and templates as last time; ``.report
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
-from pipeline.claims.register import CLAIMS_SCHEMA
+from pipeline.claims.record import read_claims_json
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text, read_meta
 from pipeline.provenance.keys import report_version
@@ -155,24 +154,6 @@ def sweep_files(out: Path) -> list[dict]:
 
 def _existing(out: Path, *names: str) -> list[str]:
     return [n for n in names if (out / n).is_file()]
-
-
-def read_claims_json(path: Path) -> dict | None:
-    """The claims register's ``claims.json``, None if there is none; LogError if it is
-    damaged or of a schema this code does not read."""
-    if not path.exists():
-        return None
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise LogError(f"{path}: not a readable claims record ({exc})") from None
-    if not isinstance(data, dict) or data.get("schema") != CLAIMS_SCHEMA:
-        got = data.get("schema") if isinstance(data, dict) else None
-        raise LogError(f"{path}: key schema: {got!r} is not a version this code reads "
-                       f"({CLAIMS_SCHEMA})")
-    if not isinstance(data.get("claims"), list):
-        raise LogError(f"{path}: key claims missing")
-    return data
 
 
 def _remove_stale(out: Path, keep: set[Path]) -> None:

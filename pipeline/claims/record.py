@@ -1,0 +1,97 @@
+"""``claims.json``: the evaluated register as the claims stage leaves it. Written once per
+evaluation; read back for the summary lines, the counts and the exit code (the same whether
+the register was evaluated now or is reused, ``pipeline.provenance.validity.current_claims``)
+and by the reports."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, ClaimsFile
+from pipeline.errors import LogError
+from pipeline.logs import atomic_write_text
+from pipeline.paths import display_path
+
+if TYPE_CHECKING:
+    from pipeline.claims.evaluate import ClaimEval
+
+STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
+RECORD_NAME = "claims.json"
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
+
+
+def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
+                      version: str) -> Path:
+    """``out_dir/claims.json``: each claim's status, checks (value, threshold) and provenance;
+    NaN and infinities as strings."""
+    path = Path(out_dir) / RECORD_NAME
+    data = {"schema": CLAIMS_SCHEMA, "claims_file": display_path(cf.source),
+            "source_version": version,
+            "claims": [{"id": r.claim.id, "statement": r.claim.statement,
+                        "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
+                        "checks": [{"metric": c.check.metric, "op": c.check.op,
+                                    "rel_tol": c.check.rel_tol,
+                                    "value": _jsonable(c.value),
+                                    "threshold": _jsonable(c.threshold), "ok": c.ok}
+                                   for c in r.checks],
+                        "provenance": r.provenance} for r in results]}
+    atomic_write_text(path, json.dumps(data, indent=1, default=str))
+    return path
+
+
+def read_claims_json(path: Path) -> dict | None:
+    """The claims register's ``claims.json``, None if there is none; LogError if it is
+    damaged or of a schema this code does not read."""
+    if not path.exists():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise LogError(f"{path}: not a readable claims record ({exc})") from None
+    if not isinstance(data, dict) or data.get("schema") != CLAIMS_SCHEMA:
+        got = data.get("schema") if isinstance(data, dict) else None
+        raise LogError(f"{path}: key schema: {got!r} is not a version this code reads "
+                       f"({CLAIMS_SCHEMA})")
+    if not isinstance(data.get("claims"), list):
+        raise LogError(f"{path}: key claims missing")
+    return data
+
+
+def status_counts(data: dict) -> str:
+    """``28 PASS, 1 OPEN``: how many claims of each status there are (none: ``no claims``)."""
+    counts = [(sum(c["status"] == s for c in data["claims"]), s) for s in STATUSES]
+    return ", ".join(f"{n} {s}" for n, s in counts if n) or "no claims"
+
+
+def exit_code(data: dict) -> int:
+    """1 if a hold claim fails or an open claim now holds, else 0."""
+    return int(any(c["status"] in ("FAIL", "NOW HOLDS") for c in data["claims"]))
+
+
+def summary_lines(data: dict) -> list[str]:
+    """One line per claim: its status and each check's value against its threshold."""
+    return [f"{c['id']:>4} {c['status']:<9} " + "; ".join(
+        f"{k['metric']} = {_short(k['value'])} ({OPERATORS[k['op']][1]} {_short(k['threshold'])})"
+        for k in c["checks"]) for c in data["claims"]]
+
+
+def failure_lines(data: dict) -> list[str]:
+    """What to do about each failing claim (FAIL) and each open one that now holds."""
+    return [f"claim {c['id']} fails: {c['statement']}" if c["status"] == "FAIL" else
+            f"claim {c['id']} now holds: promote it to expect: hold ({c['statement']})"
+            for c in data["claims"] if c["status"] in ("FAIL", "NOW HOLDS")]
+
+
+def _short(x: Any) -> str:
+    if isinstance(x, float):
+        return f"{x:.4g}"
+    s = json.dumps(x, default=str) if isinstance(x, (dict, list)) else str(x)
+    return s if len(s) <= 60 else s[:57] + "..."
