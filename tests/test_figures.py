@@ -11,7 +11,7 @@ from matplotlib.container import BarContainer
 from report_fixtures import built
 
 from pipeline.reports import figures as fg
-from pipeline.reports.render import load_runs, make_figures
+from pipeline.reports.render import figure_jobs, load_runs
 
 DEFAULT_RUNS = ["nominal", "omega_ripple_dt010", "omega_ripple_imex", "omega_ripple_reach",
                 "omega_ripple_unbounded", "servicer_nominal", "servicer_dt010", "servicer_imex"]
@@ -39,11 +39,12 @@ def drawn() -> list:
     mp = pytest.MonkeyPatch()
     mp.setattr(fg, "_save", lambda fig, path: figs.append((path.name, fig)))
     try:
-        made, skipped = make_figures(out, load_runs(out))
+        jobs, skipped = figure_jobs(out, load_runs(out))
+        whys = [draw(out / fig.file) for fig, draw in jobs]  # here: the report's workers'
     finally:
         mp.undo()
-    assert not skipped, skipped
-    assert len(figs) == len(made) >= 8
+    assert not skipped and not any(whys), (skipped, whys)
+    assert len(figs) == len(jobs) >= 8
     return figs
 
 

@@ -11,8 +11,11 @@ current_report`: the same inputs, renderer and templates as last time; ``.report
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import sys
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
@@ -27,6 +30,7 @@ from pipeline.reports.templating import render
 from pipeline.verify.cross_check import CrossCheck, build_cross_check, write_cross_check_json
 
 KEY_FILE = REPORT_KEY_FILE  # the key of the last complete rendering
+FIGURE_PROCESSES = 2
 
 
 def _log_of(record: dict) -> Path | None:
@@ -51,20 +55,19 @@ def load_runs(out: Path) -> list[fg.RunData]:
     return runs
 
 
-def _figure(out: Path, made: list[fg.Figure], skipped: list[str], fig: fg.Figure,
-            draw: Callable[[Path], str | None]) -> None:
+def _draw(draw: Callable[[Path], str | None], path: Path) -> str | None:
+    """Draw one figure (in a worker process); why it was skipped, or None."""
     try:
-        why = draw(out / fig.file)
+        return draw(path)
     except (LogError, OSError, KeyError, ValueError) as exc:
-        why = f"{type(exc).__name__}: {exc}"
-    if why:
-        skipped.append(f"{fig.title}: {why}")
-    else:
-        made.append(fig)
+        return f"{type(exc).__name__}: {exc}"
 
 
-def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], list[str]]:
-    made: list[fg.Figure] = []
+def figure_jobs(out: Path, runs: list[fg.RunData]
+                ) -> tuple[list[tuple[fg.Figure, Callable]], list[str]]:
+    """Every figure of the report and the function that draws it (a picklable partial that
+    takes the PNG's path), and what is left out and why."""
+    jobs: list[tuple[fg.Figure, Callable]] = []
     skipped: list[str] = []
     # A diverged run (its analysis has no per-direction stage) gets its own growth figure,
     # not a place in the others, whose scales its runaway would swamp.
@@ -82,53 +85,51 @@ def make_figures(out: Path, runs: list[fg.RunData]) -> tuple[list[fg.Figure], li
                    "‖ω_b‖ over the mission (top), the bus yaw rate v̆[2] and the camera roll "
                    "rate v̆[8] over the last second, per run: on the seed robot the period-2 "
                    "ripple is in ω_b (the bus yaw), on the servicer in the camera roll."),
-         lambda p: fg.rates(logged, p, styles), logged),
+         partial(fg.rates, logged, styles=styles), logged),
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
                    "period-2 reads −1, smooth +1."),
-         lambda p: fg.lag1_directions(analysed, p, styles), analysed),
+         partial(fg.lag1_directions, analysed, styles=styles), analysed),
         (fg.Figure("figures/gamma_ramp.png", "γ ramp with the logged s_min_G",
                    "scale_by_svd with the spec's controller.base.conditioning knobs and the "
-                   "logged (s_min_G, γ) of each step."), lambda p: fg.gamma_ramp(logged, p, styles),
-         logged),
+                   "logged (s_min_G, γ) of each step."),
+         partial(fg.gamma_ramp, logged, styles=styles), logged),
         (fg.Figure("figures/conditioning.png", "Conditioning over the mission",
                    "σ_min of Γ and J⊕ and κ(Γ) per step, as logged."),
-         lambda p: fg.conditioning(logged, p, styles), logged),
+         partial(fg.conditioning, logged, styles=styles), logged),
         (fg.Figure("figures/dt_mu.png", "dt·μ_max over the mission",
                    "The online guard's dt·μ_max per step, with the forward-Euler bound 2."),
-         lambda p: fg.dt_mu(logged, p, styles), logged),
+         partial(fg.dt_mu, logged, styles=styles), logged),
     ]
-    for fig, draw, inputs in global_figs:
-        if inputs:
-            _figure(out, made, skipped, fig, draw)
+    jobs += [(fig, draw) for fig, draw, inputs in global_figs if inputs]
     for r in diverged:
         if r.log is None:
             skipped.append(f"growth of {r.name}: its log is missing")
             continue
-        fig = fg.Figure(f"figures/growth_{r.folder}.png", f"Divergence of {r.name}",
-                        "The per-step change of ω_b on a log scale until the run was stopped, "
-                        "with the growth Φ's dominant eigenvalue predicts under each update "
-                        "order; the measured slope is the simulator's.")
-        _figure(out, made, skipped, fig, lambda p, r=r: fg.divergence_growth(r, p))
+        jobs.append((fg.Figure(
+            f"figures/growth_{r.folder}.png", f"Divergence of {r.name}",
+            "The per-step change of ω_b on a log scale until the run was stopped, with the "
+            "growth Φ's dominant eigenvalue predicts under each update order; the measured "
+            "slope is the simulator's."), partial(fg.divergence_growth, r)))
     for r in [*runs, *diverged]:
-        fig = fg.Figure(f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
-                        f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} "
-                        f"of {r.name}, explicit and imex, against the unit circle.")
-        _figure(out, made, skipped, fig, lambda p, r=r: fg.eigenvalues(r, p))
+        jobs.append((fg.Figure(
+            f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
+            f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} of {r.name}, "
+            f"explicit and imex, against the unit circle."), partial(fg.eigenvalues, r)))
     for table in sorted(Path(out).glob("sweeps/*/sweep.parquet")):
         name = table.parent.name
         if fg.sweep_key(table) == "robot.bus_inertia_scale":
-            fig = fg.Figure(f"figures/sweep_{name}.png", f"Bus-inertia sweep, {name}",
-                            "Lag-1 of ω_b's dominant step component and ω_b's period-2 "
-                            "amplitude against the bus rigid body's I_zz,bus; the dashed line "
-                            "is the predicted crossing I_zz,bus = dt·D_b/2, where dt·μ_bus = 2.")
-            _figure(out, made, skipped, fig, lambda p, t=table: fg.inertia_map(t, p))
+            jobs.append((fg.Figure(
+                f"figures/sweep_{name}.png", f"Bus-inertia sweep, {name}",
+                "Lag-1 of ω_b's dominant step component and ω_b's period-2 amplitude against "
+                "the bus rigid body's I_zz,bus; the dashed line is the predicted crossing "
+                "I_zz,bus = dt·D_b/2, where dt·μ_bus = 2."), partial(fg.inertia_map, table)))
             continue
-        fig = fg.Figure(f"figures/sweep_{name}.png", f"dt-sweep stability map, {name}",
-                        f"Dominant lag-1 and dt·μ_max against mission.dt over sweep {name}; "
-                        "red squares are points above the bound 2, the dashed line dt*.")
-        _figure(out, made, skipped, fig, lambda p, t=table: fg.sweep_map(t, p))
-    return made, skipped
+        jobs.append((fg.Figure(
+            f"figures/sweep_{name}.png", f"dt-sweep stability map, {name}",
+            f"Dominant lag-1 and dt·μ_max against mission.dt over sweep {name}; red squares are "
+            "points above the bound 2, the dashed line dt*."), partial(fg.sweep_map, table)))
+    return jobs, skipped
 
 
 def sweep_files(out: Path) -> list[dict]:
@@ -193,10 +194,19 @@ def render_all(out: Path, force: bool = False) -> list[Path]:
     if not runs and claims is None and not sweep_tables:
         raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json or "
                        f"sweeps/*/sweep.parquet")
-    figs, skipped = make_figures(out, runs)
+    jobs, skipped = figure_jobs(out, runs)
+    # The figures are drawn on two processes while this one checks the equations against the
+    # code (matplotlib is most of the reports' time; a figure is one task).
+    with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
+        drawing = [(fig, pool.submit(_draw, draw, out / fig.file)) for fig, draw in jobs]
+        cc = build_cross_check()
+        written = render_cross_check(out, cc)
+        figs = []
+        for fig, fut in drawing:
+            why = fut.result()
+            figs += [] if why else [fig]
+            skipped += [f"{fig.title}: {why}"] if why else []
     fig_files = {f.file for f in figs}
-    cc = build_cross_check()
-    written = render_cross_check(out, cc)
     mechanisms = []
     for r in runs:
         if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
