@@ -40,7 +40,7 @@ def drawn() -> list:
     mp.setattr(fg, "_save", lambda fig, path: figs.append((path.name, fig)))
     try:
         jobs, skipped = figure_jobs(out, load_runs(out))
-        whys = [draw(out / fig.file) for fig, draw in jobs]  # here: the report's workers'
+        whys = [fg.draw_or_why(draw, out / fig.file) for fig, draw in jobs]  # in this process
     finally:
         mp.undo()
     assert not skipped and not any(whys), (skipped, whys)

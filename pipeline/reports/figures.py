@@ -7,6 +7,7 @@ are missing is skipped (and the page says so) rather than drawn from anything el
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import MaxNLocator
 
+from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, read_columns
 from pipeline.sim.sampling import scale_by_svd
 
@@ -143,6 +145,15 @@ def _save(fig, path: Path) -> None:
     fig.savefig(buf, format="png", bbox_inches="tight")
     plt.close(fig)
     atomic_write_bytes(path, buf.getvalue())
+
+
+def draw_or_why(draw: Callable[[Path], str | None], path: Path) -> str | None:
+    """Draw one figure into ``path`` (in a worker of the report, which imports only this
+    module); why it was left out (the drawing's own reason or a bad input), or None."""
+    try:
+        return draw(path)
+    except (LogError, OSError, KeyError, ValueError) as exc:
+        return f"{type(exc).__name__}: {exc}"
 
 
 def _cols(run: RunData, cols: list[str]) -> dict[str, np.ndarray]:

@@ -55,14 +55,6 @@ def load_runs(out: Path) -> list[fg.RunData]:
     return runs
 
 
-def _draw(draw: Callable[[Path], str | None], path: Path) -> str | None:
-    """Draw one figure (in a worker process); why it was skipped, or None."""
-    try:
-        return draw(path)
-    except (LogError, OSError, KeyError, ValueError) as exc:
-        return f"{type(exc).__name__}: {exc}"
-
-
 def figure_jobs(out: Path, runs: list[fg.RunData]
                 ) -> tuple[list[tuple[fg.Figure, Callable]], list[str]]:
     """Every figure of the report and the function that draws it (a picklable partial that
@@ -198,7 +190,7 @@ def render_all(out: Path, force: bool = False) -> list[Path]:
     # The figures are drawn on two processes while this one checks the equations against the
     # code (matplotlib is most of the reports' time; a figure is one task).
     with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
-        drawing = [(fig, pool.submit(_draw, draw, out / fig.file)) for fig, draw in jobs]
+        drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
         cc = build_cross_check()
         written = render_cross_check(out, cc)
         figs = []
