@@ -4,23 +4,26 @@
 - :func:`ensure_run`: the log of a spec, reused when current and ended as expected;
 - :func:`ensure_analysis`: its analysis.json, reused when made from that log (and the same
   second log) by this analysis code;
-- :func:`ensure_sweep`: a sweep's table, run as ``python -m pipeline sweep`` in a subprocess
-  (its own Dask cluster) unless current, and its stability bracket.
+- :func:`start_sweep` and :func:`finish_sweep`: a sweep's table, run as ``python -m pipeline
+  sweep`` in a background process (its own Dask cluster) unless current, and its stability
+  bracket once it is done.
 """
 
 from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.errors import RunFailed
 from pipeline.logs import LogMeta, verify_log
 from pipeline.paths import display_path
-from pipeline.progress import interactive, stage
+from pipeline.progress import interactive, say, stage
 from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.provenance.validity import current_analysis, current_log, current_sweep
 from pipeline.sim.run import log_path, run_spec
@@ -76,28 +79,68 @@ def ensure_analysis(run: RunRecord, out_dir: Path, against: RunRecord | None = N
     return record
 
 
-def ensure_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
-                 workers: int = 2, key: str = "mission.dt", lag: str = "dominant_lag1",
-                 predicted: str = "dt_star_damping", unstable: str = "above"
-                 ) -> tuple[dict, dict]:
-    """The stability bracket of the sweep and its provenance, running the sweep if needed."""
+@dataclass
+class SweepJob:
+    """A sweep of the claims: its plan and, unless its table was current, the ``python -m
+    pipeline sweep`` process making it in the background."""
+
+    name: str
+    plan: Any
+    process: subprocess.Popen | None = None
+    log: Path | None = None
+    t0: float = 0.0
+
+    def stop(self) -> None:
+        """End a sweep still running (the claims failed before they needed it)."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait()
+
+
+def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
+                workers: int = 2) -> SweepJob:
+    """Plan the sweep and, unless its table is current, start it in a process of its own (its
+    own Dask cluster), in the background: the claims' missions and checks run meanwhile. Its
+    output goes to ``<out>/<name>/sweep.log`` (lines of two sweeps and the missions would
+    interleave, their bars collide)."""
     from pipeline.sweep.driver import plan_sweep
-    from pipeline.sweep.results import stability_bracket
 
     plan = plan_sweep(spec, sets, name, logs, out)
-    if not current_sweep(plan.table_path, plan.base.spec_hash, [p.name for p in plan.points]):
-        cmd = [sys.executable, "-m", "pipeline", "sweep", spec, "--name", name,
-               "--logs", str(logs), "--out", str(out), "--workers", str(workers)]
-        for s in sets:
-            cmd += ["--set", s]
-        # Its stderr is ours: on a terminal the sweep draws its own bar, and its one-line
-        # error, if any, shows above the failure.
-        with stage(f"sweep {name}", f"({len(plan.points)} points, {workers} workers)"):
-            r = subprocess.run(cmd, stdout=sys.stderr)
-            if r.returncode != 0:
-                raise RunFailed(f"sweep {name} failed (exit {r.returncode}); its message is "
-                                f"above")
-    bracket = stability_bracket(plan.table_path, key, lag, predicted, unstable)
+    job = SweepJob(name, plan)
+    if current_sweep(plan.table_path, plan.base.spec_hash, [p.name for p in plan.points]):
+        return job
+    cmd = [sys.executable, "-m", "pipeline", "sweep", spec, "--name", name,
+           "--logs", str(logs), "--out", str(out), "--workers", str(workers)]
+    for s in sets:
+        cmd += ["--set", s]
+    job.log = plan.table_path.parent / "sweep.log"
+    job.log.parent.mkdir(parents=True, exist_ok=True)
+    with open(job.log, "wb") as f:
+        job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
+    job.t0 = time.perf_counter()
+    say(f"sweep {name}: started in the background ({len(plan.points)} points, {workers} "
+        f"workers) -> {display_path(job.log)}")
+    return job
+
+
+def finish_sweep(job: SweepJob, key: str = "mission.dt", lag: str = "dominant_lag1",
+                 predicted: str = "dt_star_damping", unstable: str = "above"
+                 ) -> tuple[dict, dict]:
+    """Wait for the sweep (if it was started), then its stability bracket and provenance."""
+    from pipeline.sweep.results import stability_bracket
+
+    if job.process is not None:
+        rc = job.process.wait()
+        lines = job.log.read_text(errors="replace").strip().splitlines() or ["(no output)"]
+        if rc != 0:
+            say(f"sweep {job.name}: failed after {time.perf_counter() - job.t0:.1f} s")
+            raise RunFailed(f"sweep {job.name} failed (exit {rc}): {lines[-1]} (all of its "
+                            f"output: {display_path(job.log)})")
+        summary = next((ln for ln in lines if " points: " in ln), "")
+        say(f"sweep {job.name}: done in {time.perf_counter() - job.t0:.1f} s"
+            + (f" ({summary.split(' -> ')[0]})" if summary else ""))
+        job.process = None
+    bracket = stability_bracket(job.plan.table_path, key, lag, predicted, unstable)
     prov = {"source": "sweep", "version": f"sim {sim_version()}, analysis {analysis_version()}",
-            "file": display_path(plan.table_path)}
+            "file": display_path(job.plan.table_path)}
     return bracket, prov

@@ -155,6 +155,25 @@ def test_the_claims_key_follows_the_specs_the_register_finds(tmp_path):
     assert register_sources(load_claims(path))["register"] != shadowed["register"]
 
 
+def test_a_sweep_of_the_claims_runs_in_the_background_with_its_output_kept(tmp_path):
+    b = built()
+    path = tmp_path / "claims.yaml"
+    path.write_text(yaml.safe_dump({
+        "logs": str(tmp_path / "logs"),
+        "sweeps": {"dt": {"spec": str(b.spec_file("t_nominal")), "name": "tiny_dt",
+                          "set": ["mission.dt=0.01,0.03"], "workers": 1}},
+        "claims": [claim("W1", "sweep:dt.n_complete", "eq", 2),
+                   claim("W2", "sweep:dt.holds", "eq", True)]}))
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    log = tmp_path / "out" / "sweeps" / "tiny_dt" / "sweep.log"
+    assert re.search(r"sweep tiny_dt: started in the background \(2 points, 1 workers\)",
+                     r.stderr)
+    assert "sweep tiny_dt: done in" in r.stderr and "2 points: 2 complete" in r.stderr
+    assert "2 points: 2 complete, 0 failed" in log.read_text()
+    assert (tmp_path / "out" / "sweeps" / "tiny_dt" / "sweep.parquet").is_file()
+
+
 def test_open_claim_without_a_reason_is_rejected(tmp_path):
     path = claims_file(tmp_path, [claim("O3", "nominal:dominant.lag1", "lt", 0, expect="open")])
     with pytest.raises(SpecError, match=r"O3.*needs a reason"):

@@ -40,3 +40,23 @@ def test_after_the_compile_units_a_run_its_analysis_and_the_checks_compile_nothi
     assert not new, f"compiled after the compile stage: {new}"
     assert not {name: list(k.signatures) for name, k in kernels().items()
                 if len(k.signatures) > 1}
+
+
+def test_a_slice_assigned_from_the_wrong_shape_still_raises_value_error():
+    """pipeline.sim.jit swaps the message of Numba's shape check for its plain one (a cheaper
+    compile); the check itself stays: a wrong shape is a ValueError, a right one assigns."""
+    import numpy as np
+    import pytest
+    from numba import njit
+
+    import pipeline.sim.jit  # noqa: F401  (the swap happens on import)
+
+    @njit
+    def assign(a, b):
+        a[1:4] = b
+
+    a = np.zeros(5)
+    assign(a, np.arange(3.0))
+    assert a.tolist() == [0.0, 0.0, 1.0, 2.0, 0.0]
+    with pytest.raises(ValueError):
+        assign(a, np.arange(2.0))

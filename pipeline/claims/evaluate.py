@@ -110,6 +110,7 @@ class Context:
         self._cross: dict | None = None
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
+        self._jobs: dict = {}  # alias -> orchestrate.SweepJob, started by start_sweeps
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key
         # (pipeline.provenance.validity.current_claims).
@@ -161,15 +162,31 @@ class Context:
                            *(PINNED / n / "run.parquet" for n in baseline_names())]
         return self._baselines
 
-    def sweep(self, alias: str) -> tuple[dict, dict]:
-        if alias not in self._sweeps:
-            from pipeline.orchestrate import ensure_sweep
+    def start_sweeps(self) -> None:
+        """Start every sweep the claims use that is not current, in the background (each its
+        own process and Dask cluster), before the missions: they need only the kernels."""
+        from pipeline.orchestrate import start_sweep
 
+        used = dict.fromkeys(split_metric(m)[1].partition(".")[0] for c in self.cf.claims
+                             for k in c.checks for m in (k.metric, k.threshold_metric)
+                             if m and split_metric(m)[0] == "sweep")
+        for alias in used:
             ref = self.cf.sweeps[alias]
             spec = str(resolve_spec_path(ref.spec, self.here))
-            self._sweeps[alias] = ensure_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
-                                               self.out / "sweeps", ref.workers, ref.key,
-                                               ref.lag, ref.predicted, ref.unstable)
+            self._jobs[alias] = start_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
+                                            self.out / "sweeps", ref.workers)
+
+    def stop_sweeps(self) -> None:
+        for job in self._jobs.values():
+            job.stop()
+
+    def sweep(self, alias: str) -> tuple[dict, dict]:
+        if alias not in self._sweeps:
+            from pipeline.orchestrate import finish_sweep
+
+            ref = self.cf.sweeps[alias]
+            self._sweeps[alias] = finish_sweep(self._jobs[alias], ref.key, ref.lag,
+                                               ref.predicted, ref.unstable)
             self.files.append(Path(self._sweeps[alias][1]["file"]))  # the sweep's table
         return self._sweeps[alias]
 
@@ -281,8 +298,12 @@ def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
     it needs, evaluate every claim and write ``claims.json``."""
     cf = load_claims(resolve_spec_path(claims))
     ctx = Context(cf, out)
-    ctx.prepare()
-    results = evaluate(cf, ctx)
+    try:
+        ctx.start_sweeps()
+        ctx.prepare()
+        results = evaluate(cf, ctx)
+    finally:
+        ctx.stop_sweeps()  # one still running when a mission or a claim failed
     version = source_version()
     path = write_claims_json(results, cf, out, version)
     return ClaimsOutcome(cf, results, seed_table(ctx), version, path, tuple(ctx.files))
