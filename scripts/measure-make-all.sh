@@ -4,7 +4,7 @@
 #   scripts/measure-make-all.sh [REV [REPO]]     (REV: default HEAD; REPO: default this checkout)
 #
 # Clones REPO at REV into a new temporary folder, then runs `make all` there twice: cold (its
-# own .venv, pip installing from pip's cache, an empty kernel cache) and warm (everything
+# own .venv, installing from the installer's cache, an empty kernel cache) and warm (everything
 # current). Prints the machine's load before each run and both wall times; each run's output
 # is kept beside the clone (cold.log, warm.log). MEASURE_TTY=1 runs the cold `make all` on a
 # pseudo-terminal (script(1)), so its log shows the progress bars a user sees.
