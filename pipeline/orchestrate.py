@@ -16,7 +16,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
@@ -28,6 +28,9 @@ from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.provenance.validity import current_analysis, current_log, current_sweep
 from pipeline.sim.run import log_path, run_spec
 from pipeline.spec import Spec
+
+if TYPE_CHECKING:
+    from pipeline.sweep.driver import Sweep
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,7 @@ class SweepJob:
     pipeline sweep`` process making it in the background."""
 
     name: str
-    plan: Any
+    plan: Sweep
     process: subprocess.Popen | None = None
     log: Path | None = None
     t0: float = 0.0

@@ -27,6 +27,7 @@ from pipeline.claims.register import (
     ClaimsFile,
     load_claims,
     needed_runs,
+    needed_sweeps,
     note_path,
     split_metric,
 )
@@ -167,10 +168,7 @@ class Context:
         own process and Dask cluster), before the missions: they need only the kernels."""
         from pipeline.orchestrate import start_sweep
 
-        used = dict.fromkeys(split_metric(m)[1].partition(".")[0] for c in self.cf.claims
-                             for k in c.checks for m in (k.metric, k.threshold_metric)
-                             if m and split_metric(m)[0] == "sweep")
-        for alias in used:
+        for alias in needed_sweeps(self.cf):
             ref = self.cf.sweeps[alias]
             spec = str(resolve_spec_path(ref.spec, self.here))
             self._jobs[alias] = start_sweep(spec, ref.set, ref.name, self.logs / "sweeps",

@@ -241,15 +241,21 @@ def _check_log_path(metric: str, mpath: str, where: str) -> None:
                         f"{', '.join(LOG_STATS)}")
 
 
+def _metrics(cf: ClaimsFile) -> list[tuple[str, str]]:
+    """Every metric of every check, threshold metrics included, as (SOURCE, PATH)."""
+    return [split_metric(m) for claim in cf.claims for chk in claim.checks
+            for m in (chk.metric, chk.threshold_metric) if m]
+
+
+def needed_sweeps(cf: ClaimsFile) -> list[str]:
+    """The names under ``sweeps:`` the claims use, in order of first use."""
+    return list(dict.fromkeys(path.partition(".")[0] for source, path in _metrics(cf)
+                              if source == "sweep"))
+
+
 def needed_runs(cf: ClaimsFile) -> list[str]:
     """Run names the claims use, with the runs they are compared against, dependencies first."""
-    used: list[str] = []
-    for claim in cf.claims:
-        for chk in claim.checks:
-            for metric in filter(None, (chk.metric, chk.threshold_metric)):
-                source = split_metric(metric)[0]
-                if source in cf.runs and source not in used:
-                    used.append(source)
+    used = list(dict.fromkeys(source for source, _ in _metrics(cf) if source in cf.runs))
     for name in list(used):
         dep = cf.runs[name].against
         if dep is not None and dep not in used:
