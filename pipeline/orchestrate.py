@@ -122,7 +122,7 @@ def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
         job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
     job.t0 = time.perf_counter()
     say(f"sweep {name}: started in the background ({len(plan.points)} points, {workers} "
-        f"workers) -> {display_path(job.log)}")
+        f"worker{'s' if workers != 1 else ''}) -> {display_path(job.log)}")
     return job
 
 

@@ -167,7 +167,7 @@ def test_a_sweep_of_the_claims_runs_in_the_background_with_its_output_kept(tmp_p
     r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
     assert r.returncode == 0, r.stderr
     log = tmp_path / "out" / "sweeps" / "tiny_dt" / "sweep.log"
-    assert re.search(r"sweep tiny_dt: started in the background \(2 points, 1 workers\)",
+    assert re.search(r"sweep tiny_dt: started in the background \(2 points, 1 worker\)",
                      r.stderr)
     assert "sweep tiny_dt: done in" in r.stderr and "2 points: 2 complete" in r.stderr
     assert "2 points: 2 complete, 0 failed" in log.read_text()
