@@ -174,6 +174,18 @@ def test_a_sweep_of_the_claims_runs_in_the_background_with_its_output_kept(tmp_p
     assert (tmp_path / "out" / "sweeps" / "tiny_dt" / "sweep.parquet").is_file()
 
 
+def test_a_missing_note_file_is_a_one_line_error_before_any_run(tmp_path):
+    path = tmp_path / "claims.yaml"
+    path.write_text(yaml.safe_dump({
+        "note": "nowhere.yaml", "runs": {"nominal": {"spec": "nominal"}},
+        "claims": [claim("N1", "nominal:spec.mission.dt", "gt", 0)]}))
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        f"error: {path}: field note: {tmp_path / 'nowhere.yaml'}: file not found"]
+    assert not (tmp_path / "out").exists()
+
+
 def test_open_claim_without_a_reason_is_rejected(tmp_path):
     path = claims_file(tmp_path, [claim("O3", "nominal:dominant.lag1", "lt", 0, expect="open")])
     with pytest.raises(SpecError, match=r"O3.*needs a reason"):

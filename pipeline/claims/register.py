@@ -277,7 +277,10 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
     here = Path(cf.source).resolve().parent
     out = {"register": hashlib.sha256(cf.model_dump_json().encode()).hexdigest()}
     if cf.note is not None:
-        out["note"] = file_digest(note_path(cf, cf.source))
+        note = note_path(cf, cf.source)
+        if not note.is_file():
+            raise SpecError(f"{cf.source}: field note: {note}: file not found")
+        out["note"] = file_digest(note)
     for kind, refs in (("run", cf.runs), ("sweep", cf.sweeps)):
         for name, ref in refs.items():
             spec = load_spec(ref.spec, here)
