@@ -42,29 +42,12 @@ all: $(STAMP)
 ## setup: create .venv and install the pinned versions of constraints.txt
 setup: $(STAMP)
 
-# Said as it happens (the installers stay quiet). uv installs the pinned packages: about 15 s
-# from an empty cache, 5 s from its own (pip takes one to two minutes here, most of it
-# byte-compiling every module of every package up front, and its HTTP cache stays empty
-# behind a proxy that says no-store). uv is itself installed by the venv's pip, at the version
-# of UV_VERSION; where that fails, pip installs the packages instead.
+# Said as it happens: scripts/setup-venv.sh (uv, installed once per machine into the per-user
+# cache folder at the version of UV_VERSION, installs the pinned packages; where uv cannot be
+# had, pip does).
 UV_VERSION := 0.13.9
-$(STAMP): pyproject.toml constraints.txt
-	@t0=$$(date +%s); \
-	echo "setup: creating $(VENV) ($$($(PYTHON) --version 2>&1))" >&2; \
-	$(PYTHON) -m venv $(VENV) || exit $$?; \
-	echo "setup: installing uv $(UV_VERSION), the installer, into $(VENV) (pip)" >&2; \
-	if $(PY) -m pip install --quiet "uv==$(UV_VERSION)"; then \
-		echo "setup: installing the pinned packages of constraints.txt into $(VENV)" \
-			"(uv: about 15 s, 5 s from its cache; once)" >&2; \
-		$(VENV)/bin/uv pip install --quiet --python $(PY) -c constraints.txt -e ".[dev,slurm]" \
-			|| exit $$?; \
-	else \
-		echo "setup: no uv; installing the pinned packages of constraints.txt into $(VENV)" \
-			"(pip, one to two minutes; once)" >&2; \
-		$(PY) -m pip install --quiet --no-compile -c constraints.txt -e ".[dev,slurm]" \
-			|| exit $$?; \
-	fi; \
-	touch $@; echo "setup: done in $$(( $$(date +%s) - t0 )) s" >&2
+$(STAMP): pyproject.toml constraints.txt scripts/setup-venv.sh
+	@scripts/setup-venv.sh $(PYTHON) $(VENV) $(UV_VERSION) && touch $@
 
 ## compile: compile the Numba kernels once, on two cores (make all does it first)
 compile: $(STAMP)

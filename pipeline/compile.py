@@ -4,25 +4,36 @@ The kernels are compiled on first use and cached on disk (:mod:`pipeline.sim.jit
 this stage the first mission compiles the simulator's kernels, the first analysis the
 analysis' ones, and any process that starts meanwhile (a sweep's workers, a second ``make``)
 would compile them again. Here they are compiled once per version of the simulator's sources,
-in units of disjoint kernels spread over two processes:
+in units of disjoint kernels that two processes take in turn, each the first unit of
+:data:`UNITS` whose prerequisites are done (:func:`next_unit`):
 
-=========  ===============================================================  ============
-unit       kernels it compiles (and nothing another unit compiles)          waits for
-=========  ===============================================================  ============
-rotations  ``skew``, the one leaf both the transform and the loop call      —
-transform  eqs. 2–9 and 19: ``task_transform``, ``full_transform``, SVDs     rotations
-guidance   the references of eq. 17 and the coverage test of eq. 18         —
-loop       both loops of one step (``loop_update``: eqs. 12–16, 21)         rotations
-step       ``controller_step`` and the rest of a mission's calls            all above
-analysis   Γ's rebuild from a logged q and the batched SVDs                 transform
-=========  ===============================================================  ============
+==========  =============================================================  =================
+unit        kernels it compiles (and nothing another unit compiles)        waits for
+==========  =============================================================  =================
+rotations   ``skew``, the leaf most kernels call                           —
+updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       —
+rhs         eq. 13's right-hand side and its named terms                   —
+kinematics  eqs. 2–6's pieces: kinematic terms, damped inverse, Γ, Γ⁻¹     rotations
+rates       Γ̇ (eq. 7), M̂ and Ĉ (eqs. 8, 9) and σ_min, κ (eq. 19)          rotations
+errors      the task errors of eq. 14 and the CoM loop of eq. 12           rotations
+guidance    the references of eq. 17 and the coverage test of eq. 18       —
+transform   ``task_transform`` and ``full_transform`` (eqs. 2–9, 19)      kinematics, rates
+loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs, updates, errors
+row         the step kernel's readers and writers, γ (eq. 20), coverage   —
+step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
+analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics
+==========  =============================================================  =================
 
-A unit compiles by making exactly the calls a run makes (a mission's first step, the
-analysis' rebuild of Γ), or, for ``loop_update``, which only the step kernel calls, by
-compiling it for the types the step kernel passes; Numba loads a callee another unit compiled
-from the cache instead of compiling it again. Afterwards no mission, analysis, sweep worker
-or check compiles anything (``tests/test_compile.py``). A stamp in the cache folder makes the
-next call a no-op (``compile: up to date``).
+The order is the priority: the unit with the longest chain of compile time still behind it
+first, so the step kernel, which only one process can compile, starts as early as it can (a
+cold compile took 58.8 s on two processes in fixed shares of six units, 49.0 s with these
+twelve taken in turn). A unit either makes exactly the calls a run makes (a mission's first
+step, the start pose's terms, the analysis' rebuild of Γ) or compiles its kernels for the
+types their callers pass (``Dispatcher.compile``; the bundles are built from the same field
+tables). A callee another
+unit compiled is loaded from the cache, never compiled again, and each kernel ends with one
+specialisation (``tests/test_compile.py`` checks both, from an empty cache). A stamp in the
+cache folder makes the next call a no-op (``compile: up to date``).
 """
 
 from __future__ import annotations
@@ -77,12 +88,121 @@ def seed() -> _Seed:
     return _seed
 
 
-def _rotations() -> None:
+def _compile(kernel, *args) -> None:
+    """Compile ``kernel`` for the Numba types of ``args`` (their values are never used)."""
+    from numba import typeof
+
+    kernel.compile(tuple(typeof(a) for a in args))
+
+
+def _c(*shape: int):
+    """A C-ordered float64 array: the layout of the kernels' own copies and products."""
     import numpy as np
 
+    return np.zeros(shape)
+
+
+def _fortran(*shape: int):
+    """A Fortran-ordered float64 array: Pinocchio's centroidal map and its rate."""
+    import numpy as np
+
+    return np.zeros(shape, order="F")
+
+
+def _reference():
+    from pipeline.sim.base_guidance import REFERENCE_FIELDS, Reference
+
+    return Reference(**{f: _c(3, 3) if size == 9 else _c(size) for f, size in REFERENCE_FIELDS})
+
+
+def _task_errors():
+    from pipeline.sim.control_step import TaskErrors
+
+    return TaskErrors(x_tilde=_c(9), J_x=_c(9, 9), v_breve_des=_c(9), G_vc=_c(9, 3),
+                      com_vel_err=_c(3), com_pos_err=_c(3))
+
+
+def _transform_bundle():
+    from pipeline.sim.task_transform import Transform
+
+    return Transform(p_bc=_c(3), p_c=_c(3), J_bar_v=_c(3, 6), J_oplus=_c(6, 6), G_wb=_c(6, 3),
+                     J_oplus_inv=_c(6, 6), s_min_J=1.0, kappa_J=1.0, gamma=_c(12, 12),
+                     gamma_inv=_c(12, 12), gamma_dot=_c(12, 12), M_hat=_c(12, 12),
+                     C_hat=_c(12, 12), s_min_G=1.0, kappa_G=1.0)
+
+
+def _step_state():
+    from pipeline.sim import control_step as cs
+
+    return cs.StepState(**{f: (False if f == "has_prev" else 0.0 if size == 1 else _c(size))
+                           for f, size in cs.STATE_FIELDS if f != "dq"})
+
+
+def _rotations() -> None:
     from pipeline.sim.rotations import skew
 
-    skew(np.zeros(3))
+    _compile(skew, _c(3))
+
+
+def _rhs() -> None:
+    from pipeline.sim.breve_controller import breve_rhs
+
+    # C̆_c is a view of Ĉ (tr.C_hat[3:, :3]): not contiguous, Numba's layout "A".
+    _compile(breve_rhs, _c(9, 9), _c(9, 9), _c(12, 12)[3:, :3], _c(12, 12), _c(9), _c(9),
+             _task_errors(), _c(9, 9), _c(9, 9), 1.0, _c(6), _c(6))
+
+
+def _updates() -> None:
+    from pipeline.sim import breve_controller as bc
+
+    _compile(bc.explicit_update, _c(9, 9), _c(9), _c(9), 1.0, _c(3), _c(3))
+    _compile(bc.imex_update, _c(9, 9), _c(9, 9), _c(9), _c(9), 1.0, _c(3), _c(3))
+    _compile(bc.damping_rates, _c(9, 9), _c(9, 9))
+
+
+def _errors() -> None:
+    from pipeline.sim.com_controller import com_update
+    from pipeline.sim.control_step import task_error_terms
+
+    _compile(task_error_terms, _c(3, 3), _c(3, 3), _c(3), _c(3), _reference(), 1.0, _c(3))
+    _compile(com_update, *(_c(3) for _ in range(5)), *(1.0 for _ in range(7)))
+
+
+def _loop() -> None:
+    """``loop_update`` for the types :func:`controller_step` passes it: C-ordered float64
+    arrays (copies, products, ``np.diag``), float64 scalars, booleans for the flags."""
+    from pipeline.sim import control_step as cs
+    from pipeline.sim.task_transform import DynamicsInputs
+
+    # The step kernel's copies of the placements; Pinocchio's Jacobians and matrices as it
+    # hands them over (its centroidal map and rate Fortran-ordered).
+    pose = DynamicsInputs(R_tb=_c(3, 3), p_b=_c(3), R_te=_c(3, 3), p_e=_c(3), J_e=_c(6, 12),
+                          dJ_e=_c(6, 12), M=_c(12, 12), C=_c(12, 12), Ag=_fortran(6, 12),
+                          dAg=_fortran(6, 12))
+    p = cs.ControlParams(**{f: (False if f in ("derate_gain", "imex") else
+                                1.0 if size == 1 else _c(size))
+                            for f, size in cs.CONTROLLER_FIELDS})
+    _compile(cs.loop_update, pose, _transform_bundle(), _reference(), p,
+             _step_state(), 1.0, _c(9, 9), _c(9, 9))
+
+
+def _kinematics() -> None:
+    from pipeline.sim import task_transform as tt
+
+    _compile(tt.kinematic_terms, _c(3, 3), _c(3), _c(3, 3), _c(3), _c(6, 12), _c(12, 12), 1.0)
+    _compile(tt.damped_pinv, _c(6, 6), 1.0, 1.0)
+    _compile(tt.gamma_matrix, _c(3, 3), _c(3), _c(3, 6), _c(6, 3), _c(6, 6))
+    _compile(tt.gamma_inverse, _c(3, 3), _c(3), _c(3, 6), _c(6, 3), _c(6, 6))
+
+
+def _rates() -> None:
+    from pipeline.sim import task_transform as tt
+    from pipeline.sim.sampling import sigma_min_and_cond
+
+    _compile(tt.gamma_time_derivative, _c(3, 3), _c(3, 3), _c(3, 3), _c(3), _c(3), _c(3, 6),
+             _c(6, 12), _c(12), _c(6, 12), _fortran(6, 12), _fortran(6, 12), 1.0)
+    _compile(tt.transformed_dynamics, *(_c(12, 12) for _ in range(4)))
+    _compile(sigma_min_and_cond, _c(12, 12))
 
 
 def _transform() -> None:
@@ -108,36 +228,29 @@ def _guidance() -> None:
     visible(build_target(s.spec.target), np.zeros(3), pin.exp3(np.zeros(3)), s.spec.camera)
 
 
-def _loop() -> None:
-    """``loop_update`` for the types :func:`controller_step` passes it: C-ordered float64
-    arrays (copies, products, ``np.diag``), float64 scalars, booleans for the flags."""
+def _row() -> None:
     import numpy as np
-    from numba import typeof
 
     from pipeline.sim import control_step as cs
-    from pipeline.sim.base_guidance import REFERENCE_FIELDS, Reference
-    from pipeline.sim.task_transform import Transform
+    from pipeline.sim.base_guidance import read_reference
+    from pipeline.sim.sampling import scale_by_svd
+    from pipeline.sim.target import mark_visible
 
-    s = seed()
-    d = s.robot.dynamics_inputs(s.q, s.v)
-    pose = d._replace(R_tb=np.ascontiguousarray(d.R_tb).copy(), p_b=d.p_b.copy(),
-                      R_te=np.ascontiguousarray(d.R_te).copy(), p_e=d.p_e.copy())
-    n = s.robot.model.nv
-    tr = Transform(p_bc=np.zeros(3), p_c=np.zeros(3), J_bar_v=np.zeros((3, n - 6)),
-                   J_oplus=np.zeros((6, n - 6)), G_wb=np.zeros((6, 3)),
-                   J_oplus_inv=np.zeros((n - 6, 6)), s_min_J=1.0, kappa_J=1.0,
-                   gamma=np.zeros((n, n)), gamma_inv=np.zeros((n, n)),
-                   gamma_dot=np.zeros((n, n)), M_hat=np.zeros((n, n)), C_hat=np.zeros((n, n)),
-                   s_min_G=1.0, kappa_G=1.0)
-    ref = Reference(**{f: np.zeros((3, 3)) if size == 9 else np.zeros(size)
-                       for f, size in REFERENCE_FIELDS})
-    p = cs.ControlParams(**{f: (False if f in ("derate_gain", "imex") else
-                                1.0 if size == 1 else np.zeros(size))
-                            for f, size in cs.CONTROLLER_FIELDS})
-    st = cs.StepState(**{f: (False if f == "has_prev" else 0.0 if size == 1 else np.zeros(size))
-                         for f, size in cs.STATE_FIELDS if f != "dq"})
-    args = (pose, tr, ref, p, st, 1.0, np.zeros((9, 9)), np.zeros((9, 9)))
-    cs.loop_update.compile(tuple(typeof(a) for a in args))
+    flags = np.zeros(3, dtype=np.bool_)
+    out = cs.LoopResult(v=_c(12), v_c=_c(3), v_breve=_c(9), integral=_c(3), x_tilde=_c(9),
+                        v_breve_des=_c(9), mu_max=1.0, hit_acc=flags, hit_rate=flags,
+                        sat_v_c_acc=False, sat_v_c_rate=False, sat_v_max=False,
+                        com_pos_err=_c(3))
+    _compile(cs.read_params, _c(cs.CONTROLLER_SIZE))
+    _compile(cs.read_state, _c(cs.STATE_SIZE))
+    _compile(read_reference, _c(1))
+    _compile(cs.write_row, _c(cs.ROW_SIZE), _step_state(), _transform_bundle(), 1.0, 1.0, out,
+             1.0, 1.0, 1.0)
+    _compile(cs.pointing_errors, _c(3, 3), _c(3), _c(3, 3), _c(3), _c(3))
+    _compile(cs.state_is_finite, _c(13), _c(12), _c(9), _c(3))
+    _compile(scale_by_svd, 1.0, 1.0, 1.0, 1.0)
+    _compile(mark_visible, _c(1, 3), _c(1, 3), _c(3), _c(3, 3), 1.0, 1.0, 1.0, 1.0,
+             np.zeros(1, dtype=np.bool_))
 
 
 def _step() -> None:
@@ -161,35 +274,46 @@ def _analysis() -> None:
     svd_right(gamma)
 
 
+# In priority order (the module docstring's table): a free process takes the first unit whose
+# prerequisites are done. The order is by the longest chain of compile time from each unit to
+# the end (the classic list-scheduling rule), with the times a cold compile measured here.
 UNITS = {u.name: u for u in (
     Unit("rotations", "the shared rotation leaf", (), _rotations),
-    Unit("transform", "the task transform (eqs. 2-9, 19)", ("rotations",), _transform),
+    Unit("updates", "the integrators and damping rates (eqs. 15, 21)", (), _updates),
+    Unit("rhs", "eq. 13's right-hand side", (), _rhs),
+    Unit("kinematics", "the pieces of eqs. 2-6", ("rotations",), _kinematics),
+    Unit("rates", "Γ̇, M̂, Ĉ and Γ's conditioning (eqs. 7-9, 19)", ("rotations",), _rates),
+    Unit("errors", "the task errors and CoM loop (eqs. 12, 14)", ("rotations",), _errors),
     Unit("guidance", "the references and coverage (eqs. 17, 18)", (), _guidance),
-    Unit("loop", "the loops of one step (eqs. 12-16, 21)", ("rotations",), _loop),
-    Unit("step", "the step kernel (eq. 22)", ("transform", "guidance", "loop"), _step),
-    Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("transform",), _analysis),
+    Unit("transform", "the task transform (eqs. 2-9, 19)", ("kinematics", "rates"),
+         _transform),
+    Unit("loop", "the loops of one step (eqs. 12-16, 21)", ("rhs", "updates", "errors"),
+         _loop),
+    Unit("row", "the step's readers, writers and γ ramp (eq. 20)", (), _row),
+    Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
+    Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics",), _analysis),
 )}
-# The two processes' shares: the longest chain (rotations, transform, step) in one, the rest
-# in the other, so the two cores stay busy until the step kernel.
-SHARES = (("rotations", "transform", "step"), ("guidance", "loop", "analysis"))
 
 
-def _worker(names: tuple[str, ...], done: dict, failed, report) -> None:
-    """Compile ``names`` in order, each once the units it waits for are done (in any
-    process); ``report`` gets (unit, seconds) or (unit, None, message)."""
-    for name in names:
-        for dep in UNITS[name].deps:
-            while not done[dep].wait(0.2):
-                if failed.is_set():
-                    return
+def next_unit(done: set[str], taken: set[str]) -> str | None:
+    """The first unit of :data:`UNITS` not yet taken whose prerequisites are all done, or
+    None when none is ready."""
+    for name, unit in UNITS.items():
+        if name not in taken and set(unit.deps) <= done:
+            return name
+    return None
+
+
+def _worker(tasks, report) -> None:
+    """Compile the units named on ``tasks`` until it says None; ``report`` gets (unit,
+    seconds, "") or (unit, None, message)."""
+    while (name := tasks.get()) is not None:
         t0 = time.perf_counter()
         try:
             UNITS[name].run()
         except BaseException as exc:  # reported to the parent, then raised again
-            failed.set()
             report.put((name, None, f"{type(exc).__name__}: {exc}"))
             raise
-        done[name].set()
         report.put((name, time.perf_counter() - t0, ""))
 
 
@@ -216,46 +340,59 @@ def compile_kernels(processes: int = 2) -> Path | None:
     if stamp.is_file() and stamp.read_text() == text:
         say(f"compile: up to date -> {display_path(folder)}")
         return folder
-    shares = SHARES if processes > 1 else (tuple(UNITS),)
-    with stage("compile", f"({len(UNITS)} units of kernels, {len(shares)} processes) -> "
+    processes = max(1, min(processes, len(UNITS)))
+    with stage("compile", f"({len(UNITS)} units of kernels, {processes} processes) -> "
                           f"{display_path(folder)}") as st:
-        ctx = mp.get_context("spawn")
-        done = {name: ctx.Event() for name in UNITS}
-        failed, report = ctx.Event(), ctx.Queue()
-        procs = [ctx.Process(target=_worker, args=(share, done, failed, report), daemon=True)
-                 for share in shares]
-        for p in procs:
-            p.start()
-        _follow(procs, report, failed)
+        _schedule(processes)
         folder.mkdir(parents=True, exist_ok=True)
         stamp.write_text(text)
         st.done(f"{len(list(folder.rglob('*.nbi')))} kernels cached")
     return folder
 
 
-def _follow(procs, report, failed) -> None:
-    """Print each unit as it ends (a bar on a terminal) until every process has ended."""
+def _schedule(processes: int) -> None:
+    """Hand each free process the next unit (:func:`next_unit`) until every unit is done;
+    print each unit as it ends (a bar on a terminal). A failed unit or a process that ends
+    unexpectedly stops them all (RunFailed)."""
     from tqdm import tqdm
 
-    finished, error = 0, ""
+    ctx = mp.get_context("spawn")
+    report = ctx.Queue()
+    tasks = [ctx.Queue() for _ in range(processes)]
+    procs = [ctx.Process(target=_worker, args=(q, report), daemon=True) for q in tasks]
+    for p in procs:
+        p.start()
+    done: set[str] = set()
+    running: dict[str, int] = {}  # unit -> the process compiling it
+    error = ""
     with tqdm(total=len(UNITS), disable=not interactive(), unit="unit", desc="compile",
               file=sys.stderr, leave=False) as bar:
-        while finished < len(UNITS) and not error:
+        while len(done) < len(UNITS) and not error:
+            for i in set(range(processes)) - set(running.values()):
+                name = next_unit(done, done | running.keys())
+                if name is None:
+                    break
+                running[name] = i
+                tasks[i].put(name)
+            if not running:
+                error = f"units {sorted(set(UNITS) - done)} wait for each other"
+                break
             try:
                 name, seconds, message = report.get(timeout=0.5)
             except queue.Empty:
                 if any(p.exitcode not in (None, 0) for p in procs):
                     error = "a compiling process ended unexpectedly"
                 continue
+            del running[name]
             if seconds is None:
                 error = f"unit {name}: {message}"
                 continue
-            finished += 1
+            done.add(name)
             bar.clear()
             say(f"compile: {name} ({UNITS[name].what}) in {seconds:.1f} s")
             bar.update(1)
-    if error:
-        failed.set()
+    for q in tasks:
+        q.put(None)
     for p in procs:
         p.join(timeout=None if not error else 10)
         if p.is_alive():

@@ -3,6 +3,9 @@ for the one signature they call it with: afterwards nothing compiles again (pipe
 
 from __future__ import annotations
 
+import os
+import pickle
+import subprocess
 import sys
 
 from numba.core.registry import CPUDispatcher
@@ -40,6 +43,46 @@ def test_after_the_compile_units_a_run_its_analysis_and_the_checks_compile_nothi
     assert not new, f"compiled after the compile stage: {new}"
     assert not {name: list(k.signatures) for name, k in kernels().items()
                 if len(k.signatures) > 1}
+
+
+# A new process with the cache the compile stage filled: a short mission, its analysis and the
+# equation checks, then the number of kernels each dispatcher compiled (cache misses).
+_AFTER_COMPILE = """
+from pipeline.analysis.stages import analyze_log
+from pipeline.sim.run import run_spec
+from pipeline.spec import load_spec, with_overrides
+from pipeline.verify.cross_check import build_cross_check
+import sys
+spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 3.0}, name="cold")
+analyze_log(run_spec(spec, sys.argv[1]).path)
+build_cross_check()
+from numba.core.registry import CPUDispatcher
+print(sorted(f"{m}.{k}" for m, mod in list(sys.modules.items()) if m.startswith("pipeline.")
+             for k, v in vars(mod).items() if isinstance(v, CPUDispatcher)
+             and v.py_func.__module__ == m and sum(v.stats.cache_misses.values())))
+"""
+
+
+def test_from_an_empty_cache_the_stage_compiles_each_kernel_once_and_then_nothing_compiles(
+        tmp_path):
+    """The stage as `make all` runs it (two processes taking the units in turn) into an empty
+    cache: every kernel's index holds one specialisation (a unit that compiled a callee for
+    other types than its caller passes would leave two), and a new process then runs a
+    mission, its analysis and the checks without compiling anything."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "kernels")}
+    subprocess.run([sys.executable, "-m", "pipeline", "compile"], env=env, check=True,
+                   capture_output=True, text=True)
+    specialisations = {}
+    for index in (tmp_path / "kernels").rglob("*.nbi"):
+        with open(index, "rb") as f:  # Numba's index: its version, then (stamp, overloads)
+            pickle.load(f)
+            _, overloads = pickle.loads(f.read())
+        specialisations[index.name] = len(overloads)
+    assert len(specialisations) >= 40
+    assert {k: n for k, n in specialisations.items() if n != 1} == {}
+    after = subprocess.run([sys.executable, "-c", _AFTER_COMPILE, str(tmp_path / "logs")],
+                           env=env, check=True, capture_output=True, text=True)
+    assert after.stdout.strip().splitlines()[-1] == "[]", after.stdout
 
 
 def test_a_slice_assigned_from_the_wrong_shape_still_raises_value_error():

@@ -58,18 +58,32 @@ def test_a_mission_the_claims_run_is_a_stage_with_plain_lines_off_a_terminal(
 
 
 def test_compile_stage_each_unit_once_and_its_waits_cannot_deadlock():
-    shares = kc.SHARES
-    assert sorted(u for share in shares for u in share) == sorted(kc.UNITS)
-    done: set[str] = set()
-    cursors = [0] * len(shares)
-    while len(done) < len(kc.UNITS):  # run the shares in lock step, as the processes do
-        progressed = False
-        for i, share in enumerate(shares):
-            if cursors[i] < len(share) and set(kc.UNITS[share[cursors[i]]].deps) <= done:
-                done.add(share[cursors[i]])
-                cursors[i] += 1
-                progressed = True
-        assert progressed, f"deadlock after {sorted(done)}"
+    """Two processes taking units as the stage hands them out (each the first ready one)
+    finish every unit once, whichever of the two running units ends first."""
+    assert all(set(u.deps) <= set(kc.UNITS) for u in kc.UNITS.values())
+    for first_ends_first in (True, False):
+        done: set[str] = set()
+        running: list[str] = []
+        order = []
+        while len(done) < len(kc.UNITS):
+            while len(running) < 2 and (name := kc.next_unit(done, done | set(running))):
+                running.append(name)
+            assert running, f"deadlock after {sorted(done)}"
+            ended = running.pop(0 if first_ends_first else -1)
+            done.add(ended)
+            order.append(ended)
+        assert sorted(order) == sorted(kc.UNITS)
+        for i, name in enumerate(order):  # a unit never ends before what it waits for
+            assert set(kc.UNITS[name].deps) <= set(order[:i])
+
+
+def test_next_unit_takes_the_first_ready_unit_in_order():
+    names = list(kc.UNITS)
+    free = [n for n in names if not kc.UNITS[n].deps]
+    assert kc.next_unit(set(), set()) == free[0]
+    assert kc.next_unit(set(), set(free)) is None  # the rest wait for something
+    everything_but_step = set(names) - {"step"}
+    assert kc.next_unit(everything_but_step, everything_but_step) == "step"
 
 
 def test_compile_is_skipped_without_the_jit(monkeypatch, capsys):
