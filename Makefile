@@ -26,18 +26,15 @@ help:
 	@awk '/^## [a-z-]+: / { sub(/^## /, ""); split($$0, a, ": "); \
 		printf "  make %-10s %s\n", a[1], substr($$0, length(a[1]) + 3) }' $(firstword $(MAKEFILE_LIST))
 
-# The kernels compiled once, on both cores (a no-op once done); the claims (they run what is
-# missing, the sweeps included; each mission, analysis and sweep is a stage of its own on
-# stderr); then the reports, which link the register: the claims made every log and analysis
-# they read, so `report` is called directly, not through `make report`'s prerequisites. The
-# reports are rendered even when a claim fails, and the recipe then ends with the claims' own
-# code (1: make prints "Error 1"; GNU make itself exits 2 whenever a recipe fails, its only
-# code for that).
+# One process (`python -m pipeline all`): the kernels compiled once, on both cores (a no-op
+# once done); the claims (they run what is missing, the sweeps included; each mission,
+# analysis and sweep is a stage of its own on stderr); then the reports, which link the
+# register. The reports are rendered even when a claim fails, and the command then ends with
+# the claims' own code (1: make prints "Error 1"; GNU make itself exits 2 whenever a recipe
+# fails, its only code for that).
 ## all: set-up, compile, missions, analyses, sweeps, claims and every report (generated_reports/index.html)
 all: $(STAMP)
-	@$(PY) -m pipeline compile || exit $$?; \
-	$(PY) -m pipeline claims --claims claims --out $(REPORTS); rc=$$?; \
-	$(PY) -m pipeline report --out $(REPORTS) || exit $$?; exit $$rc
+	@$(PY) -m pipeline all --claims claims --out $(REPORTS)
 
 ## setup: create .venv and install the pinned versions of constraints.txt
 setup: $(STAMP)

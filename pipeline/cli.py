@@ -69,24 +69,30 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
                            a.window_start)
 
 
-def _cmd_report(a: argparse.Namespace) -> int:
+def _report(out: Path, force: bool = False, cross_check=None) -> int:
+    """The report stage; ``cross_check``: a CrossCheck this process already built."""
     from pipeline.progress import stage
     from pipeline.provenance.validity import REPORT_KEY_FILE, current_report
 
-    out = Path(a.out)
     # Current reports are said so before the renderer (matplotlib, the figures) is imported:
     # the second `make all` should take seconds.
-    if not a.force and out.is_dir() and current_report(out, out / REPORT_KEY_FILE):
+    if not force and out.is_dir() and current_report(out, out / REPORT_KEY_FILE):
         print(f"report: up to date (same inputs and renderer) -> {out / 'index.html'}")
         return 0
     from pipeline.reports.render import render_all
 
-    with stage("report", f"-> {a.out}"):
-        render_all(out, force=a.force)
+    with stage("report", f"-> {out}"):
+        render_all(out, force=force, cross_check=cross_check)
     return 0
 
 
-def _cmd_claims(a: argparse.Namespace) -> int:
+def _cmd_report(a: argparse.Namespace) -> int:
+    return _report(Path(a.out), a.force)
+
+
+def _claims(claims: str, out: Path, force: bool = False):
+    """The claims stage: its exit code and, when it evaluated, its ClaimsOutcome (None when
+    the register was current)."""
     from pipeline.claims.record import (
         RECORD_NAME,
         exit_code,
@@ -102,13 +108,13 @@ def _cmd_claims(a: argparse.Namespace) -> int:
     from pipeline.provenance.validity import CLAIMS_KEY_FILE, claims_key, current_claims
     from pipeline.spec import resolve_spec_path
 
-    out = Path(a.out)
     stamp, page = out / CLAIMS_KEY_FILE, out / "CLAIMS.md"
-    cf = load_claims(resolve_spec_path(a.claims))  # a bad register is one line, before any stage
+    cf = load_claims(resolve_spec_path(claims))  # a bad register is one line, before any stage
     sources = register_sources(cf)
+    outcome = None
     # Current claims are said so before the simulator, the analysis or the renderer is
     # imported: the second `make all` should take seconds.
-    if not a.force and current_claims(stamp, sources):
+    if not force and current_claims(stamp, sources):
         data = read_claims_json(out / RECORD_NAME)
         say(f"claims: up to date ({status_counts(data)}; same register, specs, artefacts and "
             f"code) -> {display_path(page)}")
@@ -117,8 +123,8 @@ def _cmd_claims(a: argparse.Namespace) -> int:
         from pipeline.reports.claims_page import render_claims
 
         # Runs, analyses, sweeps and checks are stages of their own, as they start.
-        with stage("claims", f"({a.claims}: what is missing is made first)") as st:
-            outcome = run_claims(a.claims, out)
+        with stage("claims", f"({claims}: what is missing is made first)") as st:
+            outcome = run_claims(claims, out)
             page = render_claims(outcome, out)
             made = [outcome.record, page, page.with_suffix(".html")]
             atomic_write_text(stamp, claims_key(sources, [*outcome.files, *made]))
@@ -129,7 +135,31 @@ def _cmd_claims(a: argparse.Namespace) -> int:
     for line in failure_lines(data):
         print(line, file=sys.stderr)
     print(f"-> {display_path(page)}")
-    return exit_code(data)
+    return exit_code(data), outcome
+
+
+def _cmd_claims(a: argparse.Namespace) -> int:
+    return _claims(a.claims, Path(a.out), a.force)[0]
+
+
+def _cmd_all(a: argparse.Namespace) -> int:
+    """compile, claims, report in one process (`make all`): the libraries are imported once
+    and the report reuses the claims' check of the equations against the code. A claim or a
+    run that fails still leaves the reports rendered, then the exit code is the claims' (1);
+    bad input stops at once (2)."""
+    from pipeline.compile import compile_kernels
+
+    out = Path(a.out)
+    compile_kernels(a.processes)
+    try:
+        code, outcome = _claims(a.claims, out)
+    except PipelineError as exc:
+        if exc.exit_code == 2:
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        code, outcome = exc.exit_code, None
+    report = _report(out, cross_check=outcome.cross_check if outcome is not None else None)
+    return code or report
 
 
 def _cmd_sweep(a: argparse.Namespace) -> int:
@@ -156,7 +186,7 @@ SPEC_HELP = ("a spec name on the spec search path (beside, $BREVE_SPEC_PATH, the
 DESCRIPTION = """\
 Simulate a free-floating space robot (a spacecraft bus carrying a 6-DoF arm with an
 inspection camera) from a mission spec, analyse its logs, and report what they show.
-A typical session: validate, run, analyze, report; `make all` does every stage."""
+A typical session: validate, run, analyze, report; `all` (`make all`) does every stage."""
 
 EPILOG = """\
 examples:
@@ -192,6 +222,20 @@ def build_parser() -> argparse.ArgumentParser:
                    version=f"breve-pipeline {package_version()}",
                    help="print the release and exit (e.g. breve-pipeline 0.1.0)")
     sub = p.add_subparsers(dest="command", required=True, title="stages", metavar="STAGE")
+
+    al = _stage(sub, "all", "compile, then the claims (running the missions, analyses and "
+                "sweeps they need), then every report, as `make all` does",
+                "--claims claims --out generated_reports")
+    al.add_argument("--claims", default="claims", metavar="FILE",
+                    help="claims file, as for `claims` (default: claims, the shipped register; "
+                    "e.g. --claims claims_ci)")
+    al.add_argument("--out", default="generated_reports", metavar="DIR",
+                    help="report folder for the claims and the reports "
+                    "(default: generated_reports; e.g. --out /tmp/reports)")
+    al.add_argument("--processes", type=int, default=2, metavar="N",
+                    help="processes compiling the kernels, as for `compile` "
+                    "(default: 2; e.g. --processes 1)")
+    al.set_defaults(func=_cmd_all)
 
     v = _stage(sub, "validate", "check a spec and print what its run would cost, without "
                "running it", "nominal")

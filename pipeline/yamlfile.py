@@ -9,6 +9,8 @@ naming the file and, where the parser knows it, the line.
 
 from __future__ import annotations
 
+import copy
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -30,10 +32,18 @@ def _where(exc: MarkedYAMLError) -> str:
     return f" (line {mark.line + 1})" if mark is not None else ""
 
 
+@functools.lru_cache(maxsize=512)
+def _parse(text: str) -> Any:
+    # A run of the claims reads the same specs and registers some seventy times, and the
+    # pure-Python parser takes tens of milliseconds a file: each text is parsed once per
+    # process. Callers get a copy (they may change it); errors are not cached.
+    return _loader().load(text)
+
+
 def load_text(text: str, source: str, what: str = "YAML file") -> Any:
     """The document in ``text``; ``source`` names it in errors."""
     try:
-        return _loader().load(text)
+        return copy.deepcopy(_parse(text))
     except DuplicateKeyError as exc:
         key = (exc.problem or "").split('"')[1] if '"' in (exc.problem or "") else "?"
         raise SpecError(f"{source}: duplicate key {key!r}{_where(exc)} in the {what}") from None

@@ -128,3 +128,39 @@ def test_make_help_lists_every_target_with_a_line():
     listed = {m.group(1): m.group(2) for m in re.finditer(r"^\s+make (\S+)\s+(.+)$", r.stdout,
                                                           re.M)}
     assert set(phony) <= set(listed), f"targets without a help line: {set(phony) - set(listed)}"
+
+
+@pytest.mark.parametrize("claims_end, code, reported", [
+    ("pass", 0, True),
+    ("claim_fails", 1, True),  # a failed claim: the reports are still rendered, then exit 1
+    ("run_fails", 1, True),  # a mission failed: the same, with its one-line error
+    ("bad_register", 2, False),  # bad input: one line, nothing else runs
+])
+def test_all_runs_compile_claims_and_report_in_order_and_ends_with_the_claims_code(
+        monkeypatch, capsys, tmp_path, claims_end, code, reported):
+    from pipeline import cli, compile
+    from pipeline.errors import RunFailed, SpecError
+
+    calls = []
+    check = object()  # the claims' CrossCheck, handed to the report
+    outcome = argparse.Namespace(cross_check=check)
+
+    def claims(name, out, force=False):
+        calls.append(("claims", name, out))
+        if claims_end == "run_fails":
+            raise RunFailed("mission nominal: diverged")
+        if claims_end == "bad_register":
+            raise SpecError("claims.yaml: claims[0].id: missing")
+        return (1 if claims_end == "claim_fails" else 0), outcome
+
+    monkeypatch.setattr(compile, "compile_kernels", lambda n: calls.append(("compile", n)))
+    monkeypatch.setattr(cli, "_claims", claims)
+    monkeypatch.setattr(cli, "_report", lambda out, force=False, cross_check=None:
+                        calls.append(("report", out, cross_check)) or 0)
+    assert main(["all", "--out", str(tmp_path), "--claims", "claims_ci"]) == code
+    expected = [("compile", 2), ("claims", "claims_ci", tmp_path)]
+    if reported:
+        expected.append(("report", tmp_path, None if claims_end == "run_fails" else check))
+    assert calls == expected
+    err = capsys.readouterr().err
+    assert err.count("error:") == (claims_end in ("run_fails", "bad_register"))

@@ -323,3 +323,20 @@ def test_spec_files_resolve_beside_the_spec_then_on_the_search_path(tmp_path, mo
         load_spec("mine")
     monkeypatch.setenv("BREVE_SPEC_PATH", str(user))
     assert load_spec("mine").mission.duration == 1.0
+
+
+def test_a_yaml_text_read_twice_gives_two_independent_documents_and_errors_twice():
+    """The parser keeps each text's document for the process (pipeline/yamlfile.py): the second
+    read must equal the first yet be a new object, so a caller that changes its copy cannot
+    change the next caller's, and a broken text is refused every time, not once."""
+    from pipeline.errors import SpecError
+    from pipeline.yamlfile import load_text
+
+    text = "mission: {dt: 1e-2, tags: [a, b]}\n"
+    first = load_text(text, "a.yaml")
+    first["mission"]["tags"].append("c")
+    first["mission"]["dt"] = 5
+    assert load_text(text, "b.yaml") == {"mission": {"dt": 0.01, "tags": ["a", "b"]}}
+    for source in ("c.yaml", "d.yaml"):
+        with pytest.raises(SpecError, match=f"{source}: duplicate key 'x'"):
+            load_text("x: 1\nx: 2\n", source)

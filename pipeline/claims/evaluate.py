@@ -109,6 +109,7 @@ class Context:
         self.runs: dict[str, RunRecord] = {}
         self.analyses: dict[str, dict] = {}
         self._cross: dict | None = None
+        self.cross_check_result = None  # the CrossCheck itself, for a report in this process
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> orchestrate.SweepJob, started by start_sweeps
@@ -150,6 +151,7 @@ class Context:
             with stage("cross-check", "(equations against code)"):
                 cc = build_cross_check()
                 self.files.append(write_cross_check_json(self.out, cc))
+            self.cross_check_result = cc
             self.files += [EQUATIONS_MD] if EQUATIONS_MD.is_file() else []
             self._cross = {**cc.summary(), "source_version": cc.source_version}
         return self._cross
@@ -286,6 +288,7 @@ class ClaimsOutcome:
     source_version: str
     record: Path  # claims.json
     files: tuple[Path, ...]  # every artefact the evaluation read or made (Context.files)
+    cross_check: object = None  # the CrossCheck, when a claim read it (`pipeline all` reuses it)
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
@@ -304,5 +307,6 @@ def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
         ctx.stop_sweeps()  # one still running when a mission or a claim failed
     version = source_version()
     path = write_claims_json(results, cf, out, version)
-    return ClaimsOutcome(cf, results, seed_table(ctx), version, path, tuple(ctx.files))
+    return ClaimsOutcome(cf, results, seed_table(ctx), version, path, tuple(ctx.files),
+                         ctx.cross_check_result)
 

@@ -166,9 +166,12 @@ def render_cross_check(out: Path, cc: CrossCheck) -> list[Path]:
             write_cross_check_json(out, cc)]
 
 
-def render_all(out: Path, force: bool = False) -> list[Path]:
+def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = None
+               ) -> list[Path]:
     """Render every report into ``out``; returns the files written (index first), none when
-    the reports are current and ``force`` is false.
+    the reports are current and ``force`` is false. ``cross_check``: the equations checked
+    against the code earlier in this process (by the claims of ``pipeline all``), else they
+    are checked here.
 
     Refuses (exit 2) a folder that does not exist or holds nothing to report, and a damaged
     analysis.json or claims.json; removes the reports and figures of runs that are gone."""
@@ -191,7 +194,7 @@ def render_all(out: Path, force: bool = False) -> list[Path]:
     # code (matplotlib is most of the reports' time; a figure is one task).
     with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
         drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
-        cc = build_cross_check()
+        cc = cross_check if cross_check is not None else build_cross_check()
         written = render_cross_check(out, cc)
         figs = []
         for fig, fut in drawing:
