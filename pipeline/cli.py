@@ -142,6 +142,16 @@ def _cmd_claims(a: argparse.Namespace) -> int:
     return _claims(a.claims, Path(a.out), a.force)[0]
 
 
+def _import_later_stages() -> None:
+    """Import what the claims and the reports will (the simulator, the analysis, Dask,
+    matplotlib: seconds, most of it reading and byte-compiling modules the first time), while
+    the kernels' last unit leaves a core free. Only imports: nothing here compiles a kernel."""
+    import pipeline.claims.evaluate
+    import pipeline.reports.claims_page
+    import pipeline.reports.render
+    import pipeline.sweep.driver  # noqa: F401
+
+
 def _cmd_all(a: argparse.Namespace) -> int:
     """compile, claims, report in one process (`make all`): the libraries are imported once
     and the report reuses the claims' check of the equations against the code. A claim or a
@@ -150,7 +160,7 @@ def _cmd_all(a: argparse.Namespace) -> int:
     from pipeline.compile import compile_kernels
 
     out = Path(a.out)
-    compile_kernels(a.processes)
+    compile_kernels(a.processes, when_idle=_import_later_stages)
     try:
         code, outcome = _claims(a.claims, out)
     except PipelineError as exc:

@@ -324,9 +324,14 @@ def _stamp_text() -> str:
                        "units": list(UNITS)})
 
 
-def compile_kernels(processes: int = 2) -> Path | None:
+def compile_kernels(processes: int = 2, when_idle: Callable[[], None] | None = None
+                    ) -> Path | None:
     """Compile every unit (see the module docstring) into the kernel cache, unless its stamp
-    says it is done; returns the cache folder (None when Numba's JIT is disabled)."""
+    says it is done; returns the cache folder (None when Numba's JIT is disabled).
+
+    ``when_idle`` is started in a thread of this process the first time a compiling process
+    has no unit left to take (the step kernel's last seconds, one core free): `pipeline all`
+    imports the next stages' modules there. It must not compile anything."""
     from numba.core import config
 
     import pipeline.sim.jit  # noqa: F401  (sets the cache folder: one per source version)
@@ -343,17 +348,19 @@ def compile_kernels(processes: int = 2) -> Path | None:
     processes = max(1, min(processes, len(UNITS)))
     with stage("compile", f"({len(UNITS)} units of kernels, {processes} processes) -> "
                           f"{display_path(folder)}") as st:
-        _schedule(processes)
+        _schedule(processes, when_idle)
         folder.mkdir(parents=True, exist_ok=True)
         stamp.write_text(text)
         st.done(f"{len(list(folder.rglob('*.nbi')))} kernels cached")
     return folder
 
 
-def _schedule(processes: int) -> None:
+def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> None:
     """Hand each free process the next unit (:func:`next_unit`) until every unit is done;
     print each unit as it ends (a bar on a terminal). A failed unit or a process that ends
-    unexpectedly stops them all (RunFailed)."""
+    unexpectedly stops them all (RunFailed). ``when_idle``: see :func:`compile_kernels`."""
+    import threading
+
     from tqdm import tqdm
 
     ctx = mp.get_context("spawn")
@@ -371,6 +378,9 @@ def _schedule(processes: int) -> None:
             for i in set(range(processes)) - set(running.values()):
                 name = next_unit(done, done | running.keys())
                 if name is None:
+                    if when_idle is not None and running:
+                        threading.Thread(target=when_idle, daemon=True).start()
+                        when_idle = None
                     break
                 running[name] = i
                 tasks[i].put(name)

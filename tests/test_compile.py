@@ -103,3 +103,17 @@ def test_a_slice_assigned_from_the_wrong_shape_still_raises_value_error():
     assert a.tolist() == [0.0, 0.0, 1.0, 2.0, 0.0]
     with pytest.raises(ValueError):
         assign(a, np.arange(2.0))
+
+
+def test_what_all_imports_while_the_last_kernel_compiles_compiles_nothing():
+    """`pipeline all` imports the later stages' modules in a thread beside the compile stage's
+    last unit (pipeline.cli._import_later_stages): importing must not compile or even load a
+    kernel, or it would race the stage for the same cache entries."""
+    code = ("from pipeline.cli import _import_later_stages; _import_later_stages()\n"
+            "import sys\nfrom numba.core.registry import CPUDispatcher\n"
+            "ks = [v for m, mod in list(sys.modules.items()) if m.startswith('pipeline.')\n"
+            "      for v in vars(mod).values() if isinstance(v, CPUDispatcher)]\n"
+            "print(len(ks), sum(len(k.overloads) for k in ks))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    n_kernels, n_loaded = map(int, r.stdout.split())
+    assert n_kernels >= 40 and n_loaded == 0
