@@ -403,12 +403,15 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
             bar.update(1)
     for q in tasks:
         q.put(None)
+    if not error:
+        # Every unit has reported, so every kernel is in the cache: the processes end on
+        # their own (their exit, Numba's and LLVM's teardown, took 1-2 s to wait for).
+        return
     for p in procs:
-        p.join(timeout=None if not error else 10)
+        p.join(timeout=10)
         if p.is_alive():
             p.terminate()
-    if error:
-        raise RunFailed(f"compile: {error}")
+    raise RunFailed(f"compile: {error}")
 
 
 def compile_command(args) -> int:

@@ -153,7 +153,8 @@ def test_all_runs_compile_claims_and_report_in_order_and_ends_with_the_claims_co
             raise SpecError("claims.yaml: claims[0].id: missing")
         return (1 if claims_end == "claim_fails" else 0), outcome
 
-    monkeypatch.setattr(compile, "compile_kernels", lambda n: calls.append(("compile", n)))
+    monkeypatch.setattr(compile, "compile_kernels",
+                        lambda n, when_idle=None: calls.append(("compile", n)))
     monkeypatch.setattr(cli, "_claims", claims)
     monkeypatch.setattr(cli, "_report", lambda out, force=False, cross_check=None:
                         calls.append(("report", out, cross_check)) or 0)

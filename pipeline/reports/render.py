@@ -191,27 +191,29 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
                        f"sweeps/*/sweep.parquet")
     jobs, skipped = figure_jobs(out, runs)
     # The figures are drawn on two processes while this one checks the equations against the
-    # code (matplotlib is most of the reports' time; a figure is one task).
+    # code and renders the mechanism reports (matplotlib is most of the reports' time; a
+    # figure is one task).
     with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
         drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
         cc = cross_check if cross_check is not None else build_cross_check()
         written = render_cross_check(out, cc)
+        mechanisms = []
+        for r in runs:
+            if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
+                continue
+            ctx = mechanism_context(r, runs)
+            folder = out / r.folder
+            written += [render("mechanism.md.j2", folder / "mechanism.md", **ctx),
+                        render("mechanism.html.j2", folder / "mechanism.html", **ctx)]
+            mechanisms.append({"run": r, "verdict": ctx["verdict"], "against": ctx["names"][1]})
         figs = []
         for fig, fut in drawing:
             why = fut.result()
             figs += [] if why else [fig]
             skipped += [f"{fig.title}: {why}"] if why else []
     fig_files = {f.file for f in figs}
-    mechanisms = []
-    for r in runs:
-        if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
-            continue
-        ctx = mechanism_context(r, runs)
-        folder = out / r.folder
-        written += [render("mechanism.md.j2", folder / "mechanism.md", **ctx),
-                    render("mechanism.html.j2", folder / "mechanism.html", **ctx)]
-        mechanisms.append({"run": r, "verdict": ctx["verdict"], "against": ctx["names"][1],
-                           "eig": f"figures/eig_{r.folder}.png" in fig_files})
+    for m in mechanisms:
+        m["eig"] = f"figures/eig_{m['run'].folder}.png" in fig_files
     _remove_stale(out, {*written, *(out / f.file for f in figs)})
     pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "claims.json", "baselines.md",
                       "baselines.json", "bench.md", "bench.json", "ci/CLAIMS.html",
