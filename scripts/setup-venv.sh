@@ -30,6 +30,7 @@ if ! "$uv" --version >/dev/null 2>&1; then
         if PIP_ROOT_USER_ACTION=ignore "$python" -m pip install --quiet --no-compile \
                 --disable-pip-version-check \
                 --target "$tmp" "uv==$uv_version" && "$tmp/bin/uv" --version >/dev/null 2>&1; then
+            rm -rf "$uv_dir"  # a damaged copy (its uv did not run)
             mv -T "$tmp" "$uv_dir" 2>/dev/null || rm -rf "$tmp"
         else
             rm -rf "$tmp"
