@@ -44,7 +44,7 @@ setup: $(STAMP)
 # had, pip does).
 UV_VERSION := 0.13.9
 $(STAMP): pyproject.toml constraints.txt scripts/setup-venv.sh
-	@scripts/setup-venv.sh $(PYTHON) $(VENV) $(UV_VERSION) && touch $@
+	@bash scripts/setup-venv.sh $(PYTHON) $(VENV) $(UV_VERSION) && touch $@
 
 ## compile: compile the Numba kernels once, on two cores (make all does it first)
 compile: $(STAMP)

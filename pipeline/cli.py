@@ -168,7 +168,15 @@ def _cmd_all(a: argparse.Namespace) -> int:
             raise
         print(f"error: {exc}", file=sys.stderr)
         code, outcome = exc.exit_code, None
-    report = _report(out, cross_check=outcome.cross_check if outcome is not None else None)
+    try:
+        report = _report(out, cross_check=outcome.cross_check if outcome is not None else None)
+    except PipelineError as exc:
+        if not code:
+            raise
+        # The claims' failure is the news; the report's own error (say, nothing to report
+        # after the first mission failed) is said, and the exit code stays the claims'.
+        print(f"error: {exc}", file=sys.stderr)
+        report = exc.exit_code
     return code or report
 
 

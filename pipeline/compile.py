@@ -330,8 +330,9 @@ def compile_kernels(processes: int = 2, when_idle: Callable[[], None] | None = N
     says it is done; returns the cache folder (None when Numba's JIT is disabled).
 
     ``when_idle`` is started in a thread of this process the first time a compiling process
-    has no unit left to take (the step kernel's last seconds, one core free): `pipeline all`
-    imports the next stages' modules there. It must not compile anything."""
+    has no unit left to take while the other still compiles (here: during the step kernel,
+    the last unit, one core free), and joined before this returns: `pipeline all` imports the
+    next stages' modules there. It must not compile anything, nor raise."""
     from numba.core import config
 
     import pipeline.sim.jit  # noqa: F401  (sets the cache folder: one per source version)
@@ -371,6 +372,7 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
         p.start()
     done: set[str] = set()
     running: dict[str, int] = {}  # unit -> the process compiling it
+    idle_work: threading.Thread | None = None
     error = ""
     with tqdm(total=len(UNITS), disable=not interactive(), unit="unit", desc="compile",
               file=sys.stderr, leave=False) as bar:
@@ -378,9 +380,9 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
             for i in set(range(processes)) - set(running.values()):
                 name = next_unit(done, done | running.keys())
                 if name is None:
-                    if when_idle is not None and running:
-                        threading.Thread(target=when_idle, daemon=True).start()
-                        when_idle = None
+                    if when_idle is not None and running and idle_work is None:
+                        idle_work = threading.Thread(target=when_idle, daemon=True)
+                        idle_work.start()
                     break
                 running[name] = i
                 tasks[i].put(name)
@@ -390,9 +392,16 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
             try:
                 name, seconds, message = report.get(timeout=0.5)
             except queue.Empty:
-                if any(p.exitcode not in (None, 0) for p in procs):
-                    error = "a compiling process ended unexpectedly"
-                continue
+                # A process that ended while a unit was its own: it cannot report any more
+                # (a failed unit reports before its process ends, so read that first).
+                if any(not procs[i].is_alive() for i in running.values()):
+                    try:
+                        name, seconds, message = report.get(timeout=1.0)
+                    except queue.Empty:
+                        error = "a compiling process ended unexpectedly"
+                        continue
+                else:
+                    continue
             del running[name]
             if seconds is None:
                 error = f"unit {name}: {message}"
@@ -406,6 +415,8 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
     if not error:
         # Every unit has reported, so every kernel is in the cache: the processes end on
         # their own (their exit, Numba's and LLVM's teardown, took 1-2 s to wait for).
+        if idle_work is not None:
+            idle_work.join()
         return
     for p in procs:
         p.join(timeout=10)

@@ -13,7 +13,8 @@ rev=${1:-HEAD}
 repo=${2:-$(git -C "$(dirname "$0")/.." rev-parse --show-toplevel)}
 work=$(mktemp -d "${TMPDIR:-/tmp}/breve-measure.XXXXXX")
 git clone -q "$repo" "$work/clone" && git -C "$work/clone" checkout -q "$rev" || exit 2
-# Nothing cached but pip's wheels: no kernel cache from the environment.
+# Nothing cached but the installers' (uv's wheels, and uv itself under ~/.cache/breve-pipeline
+# once per machine; see scripts/setup-venv.sh): no kernel cache from the environment.
 unset NUMBA_CACHE_DIR BREVE_CACHE_DIR
 cd "$work/clone" || exit 2
 echo "measure: $(git rev-parse --short HEAD) in $work/clone, $(nproc) cores"

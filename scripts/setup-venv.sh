@@ -18,27 +18,38 @@ set -uo pipefail
 python=${1:?PYTHON} venv=${2:?VENV} uv_version=${3:?UV_VERSION}
 say() { echo "setup: $*" >&2; }
 t0=$(date +%s)
-cache=${BREVE_CACHE_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/breve-pipeline}
+# The per-user cache folder, as pipeline/paths.py finds it; none without a home: no uv then.
+cache=${BREVE_CACHE_DIR:-${XDG_CACHE_HOME:-${HOME:+$HOME/.cache}}}
+[ -z "${BREVE_CACHE_DIR:-}" ] && [ -n "$cache" ] && cache=$cache/breve-pipeline
+[ -n "${HOME:-}" ] && cache=${cache/#\~/$HOME}
 uv_dir=$cache/uv-$uv_version
 uv=$uv_dir/bin/uv
 
-if ! "$uv" --version >/dev/null 2>&1; then
+with_pip() {  # the venv and the packages by pip alone: where uv cannot be had or fails
+    say "$1; creating $venv with pip ($("$python" --version 2>&1))"
+    "$python" -m venv "$venv" || exit $?
+    say "installing the pinned packages of constraints.txt into $venv (pip, one to two" \
+        "minutes; once)"
+    "$venv/bin/python" -m pip install --quiet --no-compile -c constraints.txt -e ".[dev,slurm]" \
+        || exit $?
+}
+
+if [ -n "$cache" ] && ! "$uv" --version >/dev/null 2>&1; then
     say "installing uv $uv_version, the installer, into $uv_dir (pip; once per machine)"
     # Into a temporary folder beside it, then renamed: a cut-short install is never taken
-    # for a whole one, and two set-ups at once both end with one whole copy.
+    # for a whole one, and of two set-ups at once the second to finish keeps the first's.
     if mkdir -p "$cache" && tmp=$(mktemp -d "$cache/.uv-$uv_version.XXXXXX"); then
         if PIP_ROOT_USER_ACTION=ignore "$python" -m pip install --quiet --no-compile \
                 --disable-pip-version-check \
                 --target "$tmp" "uv==$uv_version" && "$tmp/bin/uv" --version >/dev/null 2>&1; then
-            rm -rf "$uv_dir"  # a damaged copy (its uv did not run)
-            mv -T "$tmp" "$uv_dir" 2>/dev/null || rm -rf "$tmp"
-        else
-            rm -rf "$tmp"
+            "$uv" --version >/dev/null 2>&1 || rm -rf "$uv_dir"  # a damaged copy
+            [ -e "$uv_dir" ] || mv "$tmp" "$uv_dir"
         fi
+        rm -rf "$tmp"
     fi
 fi
 
-if "$uv" --version >/dev/null 2>&1; then
+if [ -n "$cache" ] && "$uv" --version >/dev/null 2>&1; then
     say "creating $venv ($("$python" --version 2>&1), $("$uv" --version))"
     "$python" -m venv --without-pip "$venv" || exit $?
     # What `python -m venv` would bootstrap (pip, and setuptools before Python 3.12), pinned
@@ -48,14 +59,10 @@ None); print(' '.join(f'{n}=={v.version}' for n, v in p().items()) if p else 'pi
         || exit $?
     say "installing the pinned packages of constraints.txt into $venv (uv: about 5 s from" \
         "its cache, 15 s without; once)"
+    # shellcheck disable=SC2086  # $bootstrap: one argument per package
     "$uv" pip install --quiet --python "$venv/bin/python" -c constraints.txt \
-        -e ".[dev,slurm]" $bootstrap || exit $?
+        -e ".[dev,slurm]" $bootstrap || with_pip "uv failed (exit $?)"
 else
-    say "no uv; creating $venv with pip ($("$python" --version 2>&1))"
-    "$python" -m venv "$venv" || exit $?
-    say "installing the pinned packages of constraints.txt into $venv (pip, one to two" \
-        "minutes; once)"
-    "$venv/bin/python" -m pip install --quiet --no-compile -c constraints.txt -e ".[dev,slurm]" \
-        || exit $?
+    with_pip "no uv"
 fi
 say "done in $(( $(date +%s) - t0 )) s"

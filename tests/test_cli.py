@@ -165,3 +165,34 @@ def test_all_runs_compile_claims_and_report_in_order_and_ends_with_the_claims_co
     assert calls == expected
     err = capsys.readouterr().err
     assert err.count("error:") == (claims_end in ("run_fails", "bad_register"))
+
+
+def test_all_keeps_the_claims_code_when_the_report_then_fails_too(monkeypatch, capsys, tmp_path):
+    """A failed claim (1) and then a report that cannot render (its own error, 2): both are
+    said, and the exit code is the claims', the news."""
+    from pipeline import cli, compile
+    from pipeline.errors import LogError
+
+    def report(out, force=False, cross_check=None):
+        raise LogError(f"{out}: nothing to report")
+
+    monkeypatch.setattr(compile, "compile_kernels", lambda n, when_idle=None: None)
+    monkeypatch.setattr(cli, "_claims", lambda name, out, force=False: (1, None))
+    monkeypatch.setattr(cli, "_report", report)
+    assert main(["all", "--out", str(tmp_path)]) == 1
+    assert "nothing to report" in capsys.readouterr().err
+    monkeypatch.setattr(cli, "_claims", lambda name, out, force=False: (0, None))
+    assert main(["all", "--out", str(tmp_path)]) == 2  # claims passed: the report's own code
+
+
+def test_a_reader_that_goes_away_ends_the_command_without_a_traceback():
+    """`python -m pipeline … | head`: the pipe closes under the command; it stops quietly."""
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "pipeline", "validate", "nominal"],
+                         cwd=PROJECT_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    p.stdout.close()  # before the child writes what it found
+    err = p.stderr.read()
+    assert p.wait() == 1
+    assert "Traceback" not in err and "BrokenPipe" not in err

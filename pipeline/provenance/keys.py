@@ -48,8 +48,16 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
-def _imports(path: Path) -> set[str]:
+def _imports(path: Path) -> frozenset[str]:
     """The ``pipeline`` modules a file imports anywhere in it (functions included)."""
+    st = path.stat()
+    return _imports_of(path, st.st_mtime_ns, st.st_size)
+
+
+@cache
+def _imports_of(path: Path, mtime_ns: int, size: int) -> frozenset[str]:
+    # Parsed once per version of the file in a process: the keys of the simulator, the
+    # analysis and the reports walk mostly the same modules (a second each, unshared).
     out: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
@@ -57,7 +65,7 @@ def _imports(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             out.add(node.module)
             out |= {f"{node.module}.{a.name}" for a in node.names}
-    return {n for n in out if n.split(".")[0] == "pipeline"}
+    return frozenset(n for n in out if n.split(".")[0] == "pipeline")
 
 
 def source_closure(entries: Iterable[str]) -> list[Path]:
