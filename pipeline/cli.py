@@ -145,11 +145,16 @@ def _cmd_claims(a: argparse.Namespace) -> int:
 def _import_later_stages() -> None:
     """Import what the claims and the reports will (the simulator, the analysis, Dask,
     matplotlib: seconds, most of it reading and byte-compiling modules the first time), while
-    the kernels' last unit leaves a core free. Only imports: nothing here compiles a kernel."""
-    import pipeline.claims.evaluate
-    import pipeline.reports.claims_page
-    import pipeline.reports.render
-    import pipeline.sweep.driver  # noqa: F401
+    the kernels' last unit leaves a core free. Only imports: nothing here compiles a kernel.
+    It runs in a thread and must not raise: a module that fails to import fails again, with
+    its one-line error, where its stage imports it."""
+    try:
+        import pipeline.claims.evaluate
+        import pipeline.reports.claims_page
+        import pipeline.reports.render
+        import pipeline.sweep.driver  # noqa: F401
+    except Exception:
+        pass
 
 
 def _cmd_all(a: argparse.Namespace) -> int:

@@ -30,10 +30,10 @@ cold compile took 58.8 s on two processes in fixed shares of six units, 49.0 s w
 twelve taken in turn). A unit either makes exactly the calls a run makes (a mission's first
 step, the start pose's terms, the analysis' rebuild of Γ) or compiles its kernels for the
 types their callers pass (``Dispatcher.compile``; the bundles are built from the same field
-tables). A callee another
-unit compiled is loaded from the cache, never compiled again, and each kernel ends with one
-specialisation (``tests/test_compile.py`` checks both, from an empty cache). A stamp in the
-cache folder makes the next call a no-op (``compile: up to date``).
+tables). A callee another unit compiled is loaded from the cache, never compiled again, and
+each kernel ends with one specialisation (``tests/test_compile.py`` checks both, from an
+empty cache). A stamp in the cache folder makes the next call a no-op (``compile: up to
+date``).
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +37,9 @@ from pipeline.orchestrate import RunRecord, ensure_analysis, ensure_run
 from pipeline.paths import display_path
 from pipeline.provenance.keys import source_version
 from pipeline.spec import load_spec, resolve_spec_path
+
+if TYPE_CHECKING:
+    from pipeline.verify.cross_check import CrossCheck
 
 
 @dataclass
@@ -109,7 +112,8 @@ class Context:
         self.runs: dict[str, RunRecord] = {}
         self.analyses: dict[str, dict] = {}
         self._cross: dict | None = None
-        self.cross_check_result = None  # the CrossCheck itself, for a report in this process
+        # The CrossCheck itself, for a report in this process (`pipeline all`).
+        self.cross_check_result: CrossCheck | None = None
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> orchestrate.SweepJob, started by start_sweeps
@@ -288,7 +292,7 @@ class ClaimsOutcome:
     source_version: str
     record: Path  # claims.json
     files: tuple[Path, ...]  # every artefact the evaluation read or made (Context.files)
-    cross_check: object = None  # the CrossCheck, when a claim read it (`pipeline all` reuses it)
+    cross_check: CrossCheck | None = None  # when a claim read it (`pipeline all` reuses it)
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
