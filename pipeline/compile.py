@@ -10,7 +10,8 @@ in units of disjoint kernels that two processes take in turn, each the first uni
 ==========  =============================================================  =================
 unit        kernels it compiles (and nothing another unit compiles)        waits for
 ==========  =============================================================  =================
-rotations   ``skew``, the leaf most kernels call                           —
+linalg      the products, LU, Cholesky and Jacobi kernels every unit calls   —
+rotations   ``skew``, the leaf most kernels call                           linalg
 updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       —
 rhs         eq. 13's right-hand side and its named terms                   —
 kinematics  eqs. 2–6's pieces: kinematic terms, damped inverse, Γ, Γ⁻¹     rotations
@@ -136,6 +137,19 @@ def _step_state():
 
     return cs.StepState(**{f: (False if f == "has_prev" else 0.0 if size == 1 else _c(size))
                            for f, size in cs.STATE_FIELDS if f != "dq"})
+
+
+def _linalg() -> None:
+    """The leaves of :mod:`pipeline.sim.linalg`, for the C-ordered float64 arrays every caller
+    passes (the callers make contiguous copies first)."""
+    from pipeline.sim import linalg as la
+
+    for kernel, args in ((la.dot, (_c(3), _c(3))), (la.matvec, (_c(3, 3), _c(3))),
+                         (la.matmul, (_c(3, 3), _c(3, 3))), (la.solve, (_c(9, 9), _c(9))),
+                         (la.inverse, (_c(9, 9),)), (la.cholesky_lower, (_c(9, 9),)),
+                         (la.eigvalsh, (_c(9, 9),)), (la.svd, (_c(6, 6),)),
+                         (la.singular_values, (_c(12, 12),))):
+        _compile(kernel, *args)
 
 
 def _rotations() -> None:
@@ -266,7 +280,7 @@ def _step() -> None:
 def _analysis() -> None:
     import numpy as np
 
-    from pipeline.sim.svd import batched_singular_values, svd_right
+    from pipeline.sim.linalg import batched_singular_values, svd_right
 
     s = seed()
     gamma = s.robot.gamma_matrices(np.stack([s.q, s.q]))  # Γ rebuilt from logged q (eq. 5)
@@ -278,18 +292,19 @@ def _analysis() -> None:
 # prerequisites are done. The order is by the longest chain of compile time from each unit to
 # the end (the classic list-scheduling rule), with the times a cold compile measured here.
 UNITS = {u.name: u for u in (
-    Unit("rotations", "the shared rotation leaf", (), _rotations),
-    Unit("updates", "the integrators and damping rates (eqs. 15, 21)", (), _updates),
-    Unit("rhs", "eq. 13's right-hand side", (), _rhs),
+    Unit("linalg", "the products, LU, Cholesky and Jacobi leaves", (), _linalg),
+    Unit("rotations", "the shared rotation leaf", ("linalg",), _rotations),
+    Unit("updates", "the integrators and damping rates (eqs. 15, 21)", ("linalg",), _updates),
+    Unit("rhs", "eq. 13's right-hand side", ("linalg",), _rhs),
     Unit("kinematics", "the pieces of eqs. 2-6", ("rotations",), _kinematics),
     Unit("rates", "Γ̇, M̂, Ĉ and Γ's conditioning (eqs. 7-9, 19)", ("rotations",), _rates),
     Unit("errors", "the task errors and CoM loop (eqs. 12, 14)", ("rotations",), _errors),
-    Unit("guidance", "the references and coverage (eqs. 17, 18)", (), _guidance),
+    Unit("guidance", "the references and coverage (eqs. 17, 18)", ("linalg",), _guidance),
     Unit("transform", "the task transform (eqs. 2-9, 19)", ("kinematics", "rates"),
          _transform),
     Unit("loop", "the loops of one step (eqs. 12-16, 21)", ("rhs", "updates", "errors"),
          _loop),
-    Unit("row", "the step's readers, writers and γ ramp (eq. 20)", (), _row),
+    Unit("row", "the step's readers, writers and γ ramp (eq. 20)", ("linalg",), _row),
     Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
     Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics",), _analysis),
 )}

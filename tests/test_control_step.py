@@ -1,5 +1,5 @@
 """The compiled step's flat layouts, read by name and sensitive to every swap of two fields,
-the analysis' LAPACK SVDs against NumPy's, and the kernel cache's source key."""
+the analysis' Jacobi SVDs against NumPy's, and the kernel cache's source key."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ from pipeline.sim.control_step import (
     read_params,
 )
 from pipeline.sim.layout import offsets, pack, unpack
+from pipeline.sim.linalg import batched_singular_values, svd_right
 from pipeline.sim.mission import Mission
-from pipeline.sim.svd import batched_singular_values, svd_right
 from pipeline.sim.target import CoverageCounter
 from pipeline.spec import load_spec, with_overrides
 

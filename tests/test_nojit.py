@@ -1,11 +1,12 @@
 """``NUMBA_DISABLE_JIT=1`` runs the compiled kernels as plain Python (pipeline/sim/jit.py): a
 mission run that way must log what the compiled run logs, and its log must pass the analysis.
 
-Under the interpreter a Numba ``ExternalFunction`` (the LAPACK routines bound by name in
-pipeline/sim/svd.py) was only a type: calling it built a signature and returned it, LAPACK
-never ran, and ``singular_values`` returned its ``np.empty`` buffer, so s_min_G, κ_G, γ and
-everything after them were garbage. The kernels now call the same routines through ctypes
-there (pipeline/sim/lapack.py).
+Two earlier ways this broke: under the interpreter a Numba ``ExternalFunction`` (LAPACK bound
+by name) was only a type, so LAPACK never ran and σ were garbage; and on a processor with
+AVX-512 the modes differed by 1.7e-12 in ``pointing_err_deg``, NumPy's SIMD arccos and BLAS in
+Python mode against the C library's acos and SciPy's BLAS compiled. The kernels now do their
+own linear algebra (pipeline/sim/linalg.py) and call the C library's functions through
+``math`` in both modes.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import pytest
 
 from pipeline.claims.baselines import compare_logs
 from pipeline.paths import PROJECT_ROOT
-from pipeline.sim.lapack import cholesky_lower, inverse
+from pipeline.sim.linalg import cholesky_lower, inverse
 
 # A 1 s cut of the nominal mission: 33 steps, every term of the step (Γ's conditioning, the
 # γ ramp, both loops, the limits, the coverage).
@@ -41,11 +42,14 @@ def test_python_mode_logs_the_compiled_run_bitwise_and_passes_analysis(tmp_path:
     (max |diff| = 0, NaN counting as a difference), and the Python-mode log passes
     ``pipeline analyze`` (its provenance rebuild, run in Python mode too, included).
 
-    Tolerance 0, not a small one: both modes make the same LAPACK calls (SciPy's, the ones
-    Numba's ``np.linalg`` makes; pipeline/sim/lapack.py) on the same inputs, and this
-    explicit dt = 0.03 s loop is unstable by design (dominant eigenvalue ≈ −2.9), so a
-    last-bit difference in the state would grow about 3^33 ≈ 10^15-fold over the 33 steps:
-    a tolerance of 1e-12 on it would be no looser than 0.
+    Tolerance 0, derived: in both modes every float the step makes comes from the same
+    sequence of IEEE-754 operations (+ − × ÷ √, each correctly rounded, in the same order:
+    the products and decompositions are the project's own loops, pipeline/sim/linalg.py) and
+    from the same C-library calls (``math.sin``, ``math.cos``, ``math.acos``), so the bits
+    cannot differ on any processor; and this explicit dt = 0.03 s loop is unstable by design
+    (dominant eigenvalue ≈ −2.9), so a last-bit difference in the state would grow about
+    3^33 ≈ 10^15-fold over the 33 steps: a tolerance of 1e-12 on it would be no looser
+    than 0.
     """
     spec = tmp_path / "nojit.yaml"
     spec.write_text(SPEC)
@@ -61,9 +65,9 @@ def test_python_mode_logs_the_compiled_run_bitwise_and_passes_analysis(tmp_path:
     assert r.returncode == 0, r.stderr
 
 
-def test_lapack_cholesky_and_inverse_match_numpy_and_refuse_bad_input(rng):
-    """The kernels' Cholesky factor and inverse (Numba's LAPACK calls, pipeline/sim/lapack.py)
-    agree with NumPy's to rounding and raise LinAlgError where ``np.linalg`` does."""
+def test_cholesky_and_inverse_match_numpy_and_refuse_bad_input(rng):
+    """The kernels' Cholesky factor and inverse (pipeline/sim/linalg.py) agree with NumPy's to
+    rounding and raise LinAlgError where ``np.linalg`` does."""
     A = rng.standard_normal((9, 9))
     M = A @ A.T + 9 * np.eye(9)
     L = cholesky_lower(M)

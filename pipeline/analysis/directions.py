@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.sim.linalg import svd_right
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.svd import svd_right
 
 
 def rebuild_gamma(robot: GiordanoRobot, q: np.ndarray) -> np.ndarray:

@@ -7,12 +7,14 @@ velocities below are d/dτ and the mission multiplies them by γ.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from pipeline.sim.jit import jit
 from pipeline.sim.layout import field_places, pack
+from pipeline.sim.linalg import matmul, matvec
 from pipeline.sim.rotations import look_at, vee
 from pipeline.spec import Guidance
 
@@ -56,7 +58,9 @@ class Reference(NamedTuple):
 def orbit(tau, phase, radius, omega):
     """Circular CoM orbit in the t-frame x–y plane: position, velocity, acceleration at τ."""
     phi = phase + omega * tau
-    c, s = np.cos(phi), np.sin(phi)
+    # math's: the C library's cos and sin compiled and in Python mode alike (NumPy's may run
+    # SIMD code chosen for the processor).
+    c, s = math.cos(phi), math.sin(phi)
     return (radius * np.array([c, s, 0.0]), radius * omega * np.array([-s, c, 0.0]),
             -radius * omega * omega * np.array([c, s, 0.0]))
 
@@ -72,10 +76,10 @@ def poses(tau, p_b, use_p_b, g):
     """
     p_c, v_c, _ = orbit(tau, g[GUIDANCE_AT.phase], g[GUIDANCE_AT.radius], g[GUIDANCE_AT.omega])
     R_b = look_at(-p_b if use_p_b else -p_c, v_c)
-    p_e = p_c + R_b @ g[GUIDANCE_AT.o_ce_b].copy()
+    p_e = p_c + matvec(R_b, g[GUIDANCE_AT.o_ce_b].copy())
     aim = np.array([0.0, 0.0, g[GUIDANCE_AT.aim_amplitude]
-                    * np.sin(2 * np.pi * tau / g[GUIDANCE_AT.aim_period])])
-    R_e = look_at(aim - p_e, R_b @ g[GUIDANCE_AT.x_e_b].copy())
+                    * math.sin(2 * math.pi * tau / g[GUIDANCE_AT.aim_period])])
+    R_e = look_at(aim - p_e, matvec(R_b, g[GUIDANCE_AT.x_e_b].copy()))
     return R_b, p_e, R_e, aim
 
 
@@ -92,8 +96,8 @@ def references(tau, p_b, use_p_b, g):
     orbit_based = use_p_b and not use_p_b
     R_bp, p_ep, R_ep, _ = poses(tau + h, p_b, orbit_based, g)
     R_bm, p_em, R_em, _ = poses(tau - h, p_b, orbit_based, g)
-    w_b = vee((R_bp - R_bm) / (2 * h) @ np.ascontiguousarray(R_b.T))
-    w_e = vee((R_ep - R_em) / (2 * h) @ np.ascontiguousarray(R_e.T))
+    w_b = vee(matmul((R_bp - R_bm) / (2 * h), np.ascontiguousarray(R_b.T)))
+    w_e = vee(matmul((R_ep - R_em) / (2 * h), np.ascontiguousarray(R_e.T)))
     return Reference(p_c=p_c, v_c=v_c, a_c=a_c, R_b=R_b, w_b=w_b, p_e=p_e,
                      v_e=(p_ep - p_em) / (2 * h), R_e=R_e, w_e=w_e, aim=aim)
 

@@ -11,26 +11,26 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.jit import jit
-from pipeline.sim.lapack import cholesky_lower, inverse
 from pipeline.sim.limits import saturate_blocks
+from pipeline.sim.linalg import cholesky_lower, eigvalsh, inverse, matmul, matvec, solve
 
 
 @jit
 def coriolis_term(C_breve: np.ndarray, v_breve: np.ndarray) -> np.ndarray:
     """−C̆ v̆ (eq. 13a)."""
-    return -(np.ascontiguousarray(C_breve) @ v_breve)
+    return -matvec(np.ascontiguousarray(C_breve), v_breve)
 
 
 @jit
 def damping_term(D_breve: np.ndarray, v_breve: np.ndarray, v_breve_des: np.ndarray) -> np.ndarray:
     """−D̆ (v̆ − v̆_des) (eq. 13b)."""
-    return -(np.ascontiguousarray(D_breve) @ (v_breve - v_breve_des))
+    return -matvec(np.ascontiguousarray(D_breve), v_breve - v_breve_des)
 
 
 @jit
 def stiffness_term(J_x: np.ndarray, K_breve: np.ndarray, x_tilde: np.ndarray) -> np.ndarray:
     """−J_xᵀ K̆ x̃ (eq. 13c)."""
-    return -(np.ascontiguousarray(J_x.T) @ (np.ascontiguousarray(K_breve) @ x_tilde))
+    return -matvec(np.ascontiguousarray(J_x.T), matvec(np.ascontiguousarray(K_breve), x_tilde))
 
 
 @jit
@@ -38,7 +38,7 @@ def com_coupling_term(C_c: np.ndarray, D_breve: np.ndarray, G_vc: np.ndarray,
                       com_vel_err: np.ndarray) -> np.ndarray:
     """−(C_c + D̆ G_vc) ẋ̃_c (eq. 13d): CoM velocity error seen by the camera loop."""
     D = np.ascontiguousarray(D_breve)
-    return -((np.ascontiguousarray(C_c) + D @ np.ascontiguousarray(G_vc)) @ com_vel_err)
+    return -matvec(np.ascontiguousarray(C_c) + matmul(D, np.ascontiguousarray(G_vc)), com_vel_err)
 
 
 @jit
@@ -50,15 +50,15 @@ def posture_term(gamma_inv: np.ndarray, k_posture: float, q_joint: np.ndarray,
     reduced rows are F̂[3:] = −(Γ⁻¹[6:, 3:])ᵀ k (q − q̄).
     """
     P_T = np.ascontiguousarray(gamma_inv[6:, 3:].T)
-    return -(P_T @ (k_posture * (q_joint - q_bar)))
+    return -matvec(P_T, k_posture * (q_joint - q_bar))
 
 
 @jit
 def feedforward_term(M_breve: np.ndarray, v_breve_dot_des: np.ndarray, C_breve: np.ndarray,
                      v_breve_des: np.ndarray) -> np.ndarray:
     """FF = M̆ v̆̇_des + C̆ v̆_des (eq. 13f)."""
-    return (np.ascontiguousarray(M_breve) @ v_breve_dot_des
-            + np.ascontiguousarray(C_breve) @ v_breve_des)
+    return (matvec(np.ascontiguousarray(M_breve), v_breve_dot_des)
+            + matvec(np.ascontiguousarray(C_breve), v_breve_des))
 
 
 @jit
@@ -77,7 +77,7 @@ def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_dot_des, err, K
 @jit
 def explicit_update(M_breve, rhs, v_breve, dt, acc_bounds, rate_bounds):
     """Forward Euler (eq. 15a): v̆⁺ = sat(v̆ + dt · sat(M̆⁻¹ RHS)); which blocks saturated."""
-    acc, hit_acc = saturate_blocks(np.linalg.solve(np.ascontiguousarray(M_breve), rhs),
+    acc, hit_acc = saturate_blocks(solve(np.ascontiguousarray(M_breve), rhs),
                                    acc_bounds)
     v_new, hit_rate = saturate_blocks(v_breve + dt * acc, rate_bounds)
     return v_new, hit_acc, hit_rate
@@ -92,7 +92,7 @@ def imex_update(M_breve, D_breve, rhs, v_breve, dt, acc_bounds, rate_bounds):
     """
     M = np.ascontiguousarray(M_breve)
     D = np.ascontiguousarray(D_breve)
-    v_implicit = np.linalg.solve(M + dt * D, M @ v_breve + dt * (rhs + D @ v_breve))
+    v_implicit = solve(M + dt * D, matvec(M, v_breve) + dt * (rhs + matvec(D, v_breve)))
     acc, hit_acc = saturate_blocks((v_implicit - v_breve) / dt, acc_bounds)
     v_new, hit_rate = saturate_blocks(v_breve + dt * acc, rate_bounds)
     return v_new, hit_acc, hit_rate
@@ -106,5 +106,5 @@ def damping_rates(M_breve: np.ndarray, D_breve: np.ndarray) -> np.ndarray:
     eigenvalues, the damping-mode decay rates, are real.
     """
     L_inv = inverse(cholesky_lower(np.ascontiguousarray(M_breve)))
-    S = L_inv @ np.ascontiguousarray(D_breve) @ L_inv.T
-    return np.linalg.eigvalsh(0.5 * (S + S.T))
+    S = matmul(matmul(L_inv, np.ascontiguousarray(D_breve)), np.ascontiguousarray(L_inv.T))
+    return eigvalsh(0.5 * (S + S.T))

@@ -12,6 +12,7 @@ namedtuples built from the vectors and each field's place frozen as a constant.
 
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -22,6 +23,7 @@ from pipeline.sim.com_controller import com_update
 from pipeline.sim.jit import jit
 from pipeline.sim.layout import field_places, offsets
 from pipeline.sim.limits import LIMIT_FLAGS
+from pipeline.sim.linalg import dot, matvec
 from pipeline.sim.rotations import attitude_error
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.target import mark_visible
@@ -116,9 +118,9 @@ def task_error_terms(R_tb, R_te, p_e, p_c, ref, gamma, v_c):
     J_x[3:6, 3:6] = R_te
     J_x[6:9, 6:9] = E_e
     v_des = np.empty(9)
-    v_des[0:3] = R_bt @ (gamma * ref.w_b)
-    v_des[3:6] = R_et @ (gamma * (ref.v_e - ref.v_c))
-    v_des[6:9] = R_et @ (gamma * ref.w_e)
+    v_des[0:3] = matvec(R_bt, gamma * ref.w_b)
+    v_des[3:6] = matvec(R_et, gamma * (ref.v_e - ref.v_c))
+    v_des[6:9] = matvec(R_et, gamma * ref.w_e)
     G_vc = np.zeros((9, 3))
     G_vc[3:6] = R_et
     x = np.empty(9)
@@ -160,7 +162,7 @@ def loop_update(pose, tr, ref, p, s, gamma, K_breve, D_breve):
     nu = np.empty(12)
     nu[0:3] = v_c_new
     nu[3:12] = v_b_new
-    v_raw = np.ascontiguousarray(tr.gamma_inv) @ nu
+    v_raw = matvec(np.ascontiguousarray(tr.gamma_inv), nu)
     sat_v_max = np.any(np.abs(v_raw) > p.v_max)
     v_new = np.minimum(np.maximum(v_raw, -p.v_max), p.v_max)
     return LoopResult(v=v_new, v_c=v_c_new, v_breve=v_b_new, integral=integral_new,
@@ -173,8 +175,11 @@ def loop_update(pose, tr, ref, p, s, gamma, K_breve, D_breve):
 @jit
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle between two vectors in degrees."""
-    c = (a @ b) / np.sqrt((a @ a) * (b @ b))
-    return np.degrees(np.arccos(max(-1.0, min(1.0, c))))
+    c = dot(a, b) / math.sqrt(dot(a, a) * dot(b, b))
+    # math.acos is the C library's acos compiled and in Python mode alike (NumPy's arccos may
+    # run SIMD code chosen for the processor); degrees as Numba's and NumPy's x·(180/π), not
+    # CPython's math.degrees, x/(π/180), which differs in the last bit.
+    return math.acos(max(-1.0, min(1.0, c))) * (180.0 / math.pi)
 
 
 @jit
@@ -215,7 +220,7 @@ def write_row(row, s, tr, gamma, dt, out, pointing, boresight, coverage):
     row[ROW_AT.dt_mu_max] = dt * out.mu_max
     row[ROW_AT.pointing_err_deg] = pointing
     row[ROW_AT.boresight_err_deg] = boresight
-    row[ROW_AT.com_err] = np.sqrt(out.com_pos_err @ out.com_pos_err)
+    row[ROW_AT.com_err] = math.sqrt(dot(out.com_pos_err, out.com_pos_err))
     row[ROW_AT.coverage] = coverage
     row[ROW_AT.sat_omega_b_acc] = 1.0 if out.hit_acc[0] else 0.0
     row[ROW_AT.sat_omega_b_rate] = 1.0 if out.hit_rate[0] else 0.0

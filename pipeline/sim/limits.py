@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
 from pipeline.sim.jit import jit
+from pipeline.sim.linalg import dot
 from pipeline.spec import Limits
 
 # Blocks of v̆ = [ω_b; ν_e,lin; ν_e,ang] and the limit names that bound each.
@@ -20,10 +22,10 @@ LIMIT_FLAGS = tuple(
 @jit
 def saturate(x: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
     """sat(x) = x · min(1, bound/‖x‖): keeps the direction, bounds the norm (eq. 16)."""
-    n = np.sqrt(x @ x)
-    if n == np.inf:  # ‖x‖² overflowed: rescale, or x·bound/‖x‖ would silently be 0
+    n = math.sqrt(dot(x, x))
+    if n == math.inf:  # ‖x‖² overflowed: rescale, or x·bound/‖x‖ would silently be 0
         s = np.max(np.abs(x))
-        n = s * np.sqrt((x / s) @ (x / s))
+        n = s * math.sqrt(dot(x / s, x / s))
     if n > bound:
         return x * (bound / n), True
     return x.copy(), False

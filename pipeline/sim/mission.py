@@ -40,6 +40,7 @@ from pipeline.sim.control_step import (
 )
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
+from pipeline.sim.linalg import matvec
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import bisect_critical_step, critical_step, posture_stiffness
@@ -104,7 +105,7 @@ class Mission:
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
         ref0 = self.guidance.reference(0.0)
         q0 = q_start.copy()
-        q0[0:3] = ref0.p_c - ref0.R_b @ T0.p_bc
+        q0[0:3] = ref0.p_c - matvec(ref0.R_b, T0.p_bc)
         q0[3:7] = quat_from_matrix(ref0.R_b)
         self.q0 = q0
         # The CoM starts on the orbit at the orbit's speed (the bus was inserted into it),
@@ -116,7 +117,7 @@ class Mission:
         nv = self.robot.model.nv
         T0 = self.robot.terms(self.q0, np.zeros(nv), dynamics=False)
         v_c0 = self.v_c0.copy()
-        v0 = T0.gamma_inv @ np.concatenate([v_c0, np.zeros(9)])
+        v0 = matvec(T0.gamma_inv, np.concatenate([v_c0, np.zeros(9)]))
         return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(9))
 
     def critical_steps(self, s: LoopState) -> tuple[float, float | None]:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pipeline.sim.jit import jit
+from pipeline.sim.linalg import dot, matmul
 
 
 @jit
@@ -54,7 +57,7 @@ def attitude_error(R: np.ndarray, R_des: np.ndarray) -> tuple[np.ndarray, np.nda
     With q_err = quat(R_desᵀ R) = (ε, η), η >= 0: x̃ = 2ε, and ẋ̃ = E (ω − R_errᵀ ω_des)
     with E = η I + [ε]×, ω and ω_des in their own body frames.
     """
-    q = quat_from_matrix(np.ascontiguousarray(R_des.T) @ np.ascontiguousarray(R))
+    q = quat_from_matrix(matmul(np.ascontiguousarray(R_des.T), np.ascontiguousarray(R)))
     eps = q[:3].copy()
     return 2.0 * eps, q[3] * np.eye(3) + skew(eps)
 
@@ -63,13 +66,13 @@ def attitude_error(R: np.ndarray, R_des: np.ndarray) -> tuple[np.ndarray, np.nda
 def look_at(z_axis: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
     """Rotation whose z column is ``z_axis`` and whose x column is ``x_hint`` made orthogonal
     (eq. 17); a hint parallel to z is replaced by a fixed orthogonal direction."""
-    z = z_axis / np.sqrt(z_axis @ z_axis)
-    x = x_hint - z * (z @ x_hint)
-    nx = np.sqrt(x @ x)
+    z = z_axis / math.sqrt(dot(z_axis, z_axis))
+    x = x_hint - z * dot(z, x_hint)
+    nx = math.sqrt(dot(x, x))
     if nx < 1e-9:
         other = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         x = np.cross(z, other)
-        nx = np.sqrt(x @ x)
+        nx = math.sqrt(dot(x, x))
     x = x / nx
     R = np.empty((3, 3))
     R[:, 0] = x

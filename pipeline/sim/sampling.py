@@ -14,13 +14,13 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.sim.jit import jit
-from pipeline.sim.svd import singular_values
+from pipeline.sim.linalg import singular_values
 from pipeline.spec import ConfigSampling, Ramp
 
 
 def sigma_min(A: np.ndarray) -> float | None:
     """Smallest singular value of A, or None if A (or its SVD) is not finite (eq. 19)."""
-    A = np.asarray(A, dtype=float)
+    A = np.ascontiguousarray(A, dtype=float)
     if not np.all(np.isfinite(A)):
         return None
     s = singular_values(A)
@@ -31,8 +31,9 @@ def sigma_min(A: np.ndarray) -> float | None:
 def sigma_min_and_cond(A: np.ndarray) -> tuple[float, float]:
     """(σ_min, κ = σ_max/σ_min) from one SVD pass (eq. 19); κ = inf when σ_min = 0.
 
-    One call of LAPACK's dgesdd without singular vectors (:mod:`pipeline.sim.svd`), so the
-    simulator reads Γ's conditioning inside its compiled per-step kernel.
+    One call of the project's one-sided Jacobi SVD without singular vectors
+    (:func:`pipeline.sim.linalg.singular_values`), so the simulator reads Γ's conditioning
+    inside its compiled per-step kernel, with the same bits on every processor.
     """
     s = singular_values(A)
     smin = s[-1]

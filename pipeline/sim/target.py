@@ -6,6 +6,7 @@ origin, sampled as surface points with outward normals (panels have two faces). 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -40,8 +41,11 @@ def build_target(cfg: Target) -> TargetGeometry:
         centre = side * ey * (sy / 2 + cfg.panel_span / 2)
         for sgn in (1.0, -1.0):
             faces.append((centre, ey * cfg.panel_span, ez * cfg.panel_width, sgn * ex))
-    areas = np.array([np.linalg.norm(np.cross(u, v)) for _, u, v, _ in faces])
-    counts = np.floor(cfg.n_points * areas / areas.sum()).astype(int)
+    # Exactly rounded sums (math.fsum), not NumPy's: its dot products go to BLAS and its
+    # reductions to SIMD code, both chosen for the processor, and a last-bit difference here
+    # could move a point from one face to the next.
+    areas = np.array([math.sqrt(math.fsum(np.cross(u, v) ** 2)) for _, u, v, _ in faces])
+    counts = np.floor(cfg.n_points * areas / math.fsum(areas)).astype(int)
     counts[: cfg.n_points - counts.sum()] += 1
     rng = np.random.default_rng(cfg.seed)
     pts, nrm = zip(*(_face_samples(rng, k, *f) for k, f in zip(counts, faces, strict=True)),
@@ -61,8 +65,8 @@ def visible(target: TargetGeometry, p_e: np.ndarray, R_te: np.ndarray, cam: Came
 
 def camera_limits(cam: Camera) -> tuple[float, float, float, float]:
     """(tan(fov/2), d_min, d_max, cos(max_angle)): the camera's bounds as the kernels take them."""
-    return (np.tan(np.deg2rad(cam.fov_deg) / 2), cam.d_min, cam.d_max,
-            np.cos(np.deg2rad(cam.max_angle_deg)))
+    return (math.tan(math.radians(cam.fov_deg) / 2), cam.d_min, cam.d_max,
+            math.cos(math.radians(cam.max_angle_deg)))
 
 
 class CoverageCounter(NamedTuple):

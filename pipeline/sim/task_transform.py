@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pipeline.sim.jit import jit
+from pipeline.sim.linalg import matmul, matvec, svd
 from pipeline.sim.rotations import skew
 from pipeline.sim.sampling import sigma_min_and_cond
 
@@ -65,14 +66,14 @@ def kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass):
     p_bc = np.array([M[1, 5], M[2, 3], M[0, 4]]) / mass
     R_tb = np.ascontiguousarray(R_tb)
     R_et = np.ascontiguousarray(R_te.T)
-    p_c = p_b + R_tb @ p_bc
-    R_eb = R_et @ R_tb
-    p_ec = R_et @ (p_c - p_e)
+    p_c = p_b + matvec(R_tb, p_bc)
+    R_eb = matmul(R_et, R_tb)
+    p_ec = matvec(R_et, p_c - p_e)
     J_bar_v = np.ascontiguousarray(M[0:3, 6:]) / mass
     J_oplus = np.ascontiguousarray(J_e[:, 6:])
-    J_oplus[0:3, :] -= R_eb @ J_bar_v
+    J_oplus[0:3, :] -= matmul(R_eb, J_bar_v)
     G_wb = np.empty((6, 3))
-    G_wb[0:3] = skew(p_ec) @ R_eb
+    G_wb[0:3] = matmul(skew(p_ec), R_eb)
     G_wb[3:6] = R_eb
     return p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb
 
@@ -84,10 +85,10 @@ def damped_pinv(J, floor, damping):
     J⁺ = V diag(σ_i / (σ_i² + λ²)) Uᵀ,  λ² = damping² (1 − (σ_min/floor)²) if σ_min < floor,
     else 0: the exact inverse away from the singularity, a bounded one near it.
     """
-    U, s, Vt = np.linalg.svd(J)
+    U, s, Vt = svd(J)
     smin = s[-1]
     lam2 = damping**2 * (1.0 - (smin / floor) ** 2) if smin < floor else 0.0
-    J_inv = (Vt.T * (s / (s * s + lam2))) @ U.T
+    J_inv = matmul(np.ascontiguousarray(Vt.T) * (s / (s * s + lam2)), np.ascontiguousarray(U.T))
     kappa = s[0] / smin if smin > 0 else np.inf
     return J_inv, smin, kappa
 
@@ -101,8 +102,8 @@ def gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus):
     n = J_oplus.shape[1]
     g = np.zeros((6 + n, 6 + n))
     g[0:3, 0:3] = R_tb
-    g[0:3, 3:6] = -(R_tb @ skew(p_bc))
-    g[0:3, 6:] = R_tb @ J_bar_v
+    g[0:3, 3:6] = -matmul(R_tb, skew(p_bc))
+    g[0:3, 6:] = matmul(R_tb, J_bar_v)
     g[3, 3] = g[4, 4] = g[5, 5] = 1.0
     g[6:, 3:6] = G_wb
     g[6:, 6:] = J_oplus
@@ -116,11 +117,11 @@ def gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_oplus_inv):
     Γ⁻¹ = [[R_tbᵀ, [p_bc]× + J̄_v J⊕⁻¹ G_ωb, −J̄_v J⊕⁻¹], [0, I₃, 0], [0, −J⊕⁻¹ G_ωb, J⊕⁻¹]].
     """
     n = J_oplus_inv.shape[0]
-    JiG = J_oplus_inv @ G_wb
+    JiG = matmul(J_oplus_inv, G_wb)
     g = np.zeros((6 + n, 6 + n))
     g[0:3, 0:3] = R_tb.T
-    g[0:3, 3:6] = skew(p_bc) + J_bar_v @ JiG
-    g[0:3, 6:] = -(J_bar_v @ J_oplus_inv)
+    g[0:3, 3:6] = skew(p_bc) + matmul(J_bar_v, JiG)
+    g[0:3, 6:] = -matmul(J_bar_v, J_oplus_inv)
     g[3, 3] = g[4, 4] = g[5, 5] = 1.0
     g[6:, 3:6] = -JiG
     g[6:, 6:] = J_oplus_inv
@@ -137,24 +138,25 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
     """
     w_b = v[3:6].copy()
     qd = v[6:].copy()
-    twist_e = np.ascontiguousarray(J_e) @ v
-    v_e, w_e = twist_e[:3], twist_e[3:]
+    twist_e = matvec(np.ascontiguousarray(J_e), v)
+    v_e, w_e = twist_e[:3].copy(), twist_e[3:].copy()
     S_wb, S_we = skew(w_b), skew(w_e)
     R_bt = np.ascontiguousarray(R_tb.T)
-    J_bar_v_dot = -(S_wb @ J_bar_v) + R_bt @ np.ascontiguousarray(dAg[0:3, 6:]) / mass
-    p_bc_dot = J_bar_v @ qd
-    R_eb_dot = R_eb @ S_wb - S_we @ R_eb
-    p_c_dot = np.ascontiguousarray(Ag[0:3]) @ v / mass
-    p_ec_dot = np.ascontiguousarray(R_te.T) @ p_c_dot - S_we @ p_ec - v_e
-    R_tb_dot = R_tb @ S_wb
+    J_bar_v_dot = (-matmul(S_wb, J_bar_v)
+                   + matmul(R_bt, np.ascontiguousarray(dAg[0:3, 6:])) / mass)
+    p_bc_dot = matvec(J_bar_v, qd)
+    R_eb_dot = matmul(R_eb, S_wb) - matmul(S_we, R_eb)
+    p_c_dot = matvec(np.ascontiguousarray(Ag[0:3]), v) / mass
+    p_ec_dot = matvec(np.ascontiguousarray(R_te.T), p_c_dot) - matvec(S_we, p_ec) - v_e
+    R_tb_dot = matmul(R_tb, S_wb)
     g = np.zeros((12, 12))
     g[0:3, 0:3] = R_tb_dot
-    g[0:3, 3:6] = -(R_tb_dot @ skew(p_bc)) - R_tb @ skew(p_bc_dot)
-    g[0:3, 6:] = R_tb_dot @ J_bar_v + R_tb @ J_bar_v_dot
-    g[6:9, 3:6] = skew(p_ec_dot) @ R_eb + skew(p_ec) @ R_eb_dot
+    g[0:3, 3:6] = -matmul(R_tb_dot, skew(p_bc)) - matmul(R_tb, skew(p_bc_dot))
+    g[0:3, 6:] = matmul(R_tb_dot, J_bar_v) + matmul(R_tb, J_bar_v_dot)
+    g[6:9, 3:6] = matmul(skew(p_ec_dot), R_eb) + matmul(skew(p_ec), R_eb_dot)
     g[9:12, 3:6] = R_eb_dot
     g[6:, 6:] = dJ_e[:, 6:]
-    g[6:9, 6:] -= R_eb_dot @ J_bar_v + R_eb @ J_bar_v_dot
+    g[6:9, 6:] -= matmul(R_eb_dot, J_bar_v) + matmul(R_eb, J_bar_v_dot)
     return g
 
 
@@ -162,10 +164,11 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
 def transformed_dynamics(M, C, gamma_inv, gamma_dot):
     """M̂ = Γ⁻ᵀ M Γ⁻¹ (eq. 8) and Ĉ = Γ⁻ᵀ (C − M Γ⁻¹ Γ̇) Γ⁻¹ (eq. 9)."""
     M = np.ascontiguousarray(M)
-    MGi = M @ gamma_inv
+    MGi = matmul(M, gamma_inv)
     GiT = np.ascontiguousarray(gamma_inv.T)
-    M_hat = GiT @ MGi
-    C_hat = GiT @ (np.ascontiguousarray(C) @ gamma_inv - MGi @ (gamma_dot @ gamma_inv))
+    M_hat = matmul(GiT, MGi)
+    C_hat = matmul(GiT, matmul(np.ascontiguousarray(C), gamma_inv)
+                   - matmul(MGi, matmul(gamma_dot, gamma_inv)))
     return M_hat, C_hat
 
 
