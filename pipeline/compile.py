@@ -10,17 +10,17 @@ in units of disjoint kernels that two processes take in turn, each the first uni
 ==========  =============================================================  =================
 unit        kernels it compiles (and nothing another unit compiles)        waits for
 ==========  =============================================================  =================
-linalg      the products, LU, Cholesky and Jacobi kernels every unit calls   —
+linalg      the small dense linear algebra of ``linalg.py``, every unit's leaf —
 rotations   ``skew``, the leaf most kernels call                           linalg
-updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       —
-rhs         eq. 13's right-hand side and its named terms                   —
+updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       linalg
+rhs         eq. 13's right-hand side and its named terms                   linalg
 kinematics  eqs. 2–6's pieces: kinematic terms, damped inverse, Γ, Γ⁻¹     rotations
 rates       Γ̇ (eq. 7), M̂ and Ĉ (eqs. 8, 9) and σ_min, κ (eq. 19)          rotations
 errors      the task errors of eq. 14 and the CoM loop of eq. 12           rotations
-guidance    the references of eq. 17 and the coverage test of eq. 18       —
+guidance    the references of eq. 17 and the coverage test of eq. 18       linalg
 transform   ``task_transform`` and ``full_transform`` (eqs. 2–9, 19)      kinematics, rates
 loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs, updates, errors
-row         the step kernel's readers and writers, γ (eq. 20), coverage   —
+row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
 step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
 analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics
 ==========  =============================================================  =================
@@ -28,7 +28,7 @@ analysis    Γ's rebuild from a logged q and the batched SVDs               kine
 The order is the priority: the unit with the longest chain of compile time still behind it
 first, so the step kernel, which only one process can compile, starts as early as it can (a
 cold compile took 58.8 s on two processes in fixed shares of six units, 49.0 s with these
-twelve taken in turn). A unit either makes exactly the calls a run makes (a mission's first
+twelve taken in turn; a thirteenth, the linear algebra, came with issue 21). A unit either makes exactly the calls a run makes (a mission's first
 step, the start pose's terms, the analysis' rebuild of Γ) or compiles its kernels for the
 types their callers pass (``Dispatcher.compile``; the bundles are built from the same field
 tables). A callee another unit compiled is loaded from the cache, never compiled again, and
