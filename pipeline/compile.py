@@ -10,7 +10,7 @@ in units of disjoint kernels that two processes take in turn, each the first uni
 ==========  =============================================================  =================
 unit        kernels it compiles (and nothing another unit compiles)        waits for
 ==========  =============================================================  =================
-linalg      the small dense linear algebra of ``linalg.py``, every unit's leaf —
+linalg      ``linalg.py``'s products and decompositions, every unit's leaf    —
 rotations   ``skew``, the leaf most kernels call                           linalg
 updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       linalg
 rhs         eq. 13's right-hand side and its named terms                   linalg
@@ -28,10 +28,11 @@ analysis    Γ's rebuild from a logged q and the batched SVDs               kine
 The order is the priority: the unit with the longest chain of compile time still behind it
 first, so the step kernel, which only one process can compile, starts as early as it can (a
 cold compile took 58.8 s on two processes in fixed shares of six units, 49.0 s with these
-twelve taken in turn; a thirteenth, the linear algebra, came with issue 21). A unit either makes exactly the calls a run makes (a mission's first
-step, the start pose's terms, the analysis' rebuild of Γ) or compiles its kernels for the
-types their callers pass (``Dispatcher.compile``; the bundles are built from the same field
-tables). A callee another unit compiled is loaded from the cache, never compiled again, and
+twelve taken in turn; the thirteenth, the linear algebra, came later). A unit either makes
+exactly the calls a run makes (a mission's first step, the start pose's terms, the
+analysis' rebuild of Γ) or compiles its kernels for the types their callers pass
+(``Dispatcher.compile``; the bundles are built from the same field tables). A callee
+another unit compiled is loaded from the cache, never compiled again, and
 each kernel ends with one specialisation (``tests/test_compile.py`` checks both, from an
 empty cache). A stamp in the cache folder makes the next call a no-op (``compile: up to
 date``).
