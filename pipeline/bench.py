@@ -16,6 +16,8 @@ drift of the host's speed between repeats does not enter them:
   lag-1), streamed by row group as ``analyze`` does it;
 - growth of mission wall time with length (10³, 10⁴, 10⁵ steps) and its fitted exponent;
 - peak memory (max RSS of a fresh process) of ``analyze`` on a 10⁵- and a 10⁶-step log;
+- the step's linear algebra, the project's kernels against BLAS and LAPACK in compiled code
+  (:mod:`pipeline.bench_linalg`);
 - sweep throughput (``sweep.<setting>.*``): points per second, start-up and the per-point
   overhead of Dask, in process, on a 2-worker LocalCluster and on the local SLURM
   (``pipeline.sweep.throughput``; the SLURM setting is recorded as skipped, with the reason,
@@ -40,6 +42,7 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis import signals
 from pipeline.analysis.stages import Window, rebuild_and_project
+from pipeline.bench_linalg import linalg_costs, linalg_markdown
 from pipeline.logs import atomic_write_text, file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
@@ -213,6 +216,8 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         big = tiled_log(long, tmp / "big" / "bench_long" / "run.parquet", 10)
         memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
                   f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
+    _progress(f"the step's linear algebra against BLAS and LAPACK, {repeats} repeats")
+    linalg = linalg_costs(repeats)
     sweeps = {k: v.as_dict() for k, v in sweep_throughput(progress=_progress).items()}
     result = {
         "floor_us": costs["floor_us"],
@@ -224,6 +229,7 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         "analysis_ratio_stats": costs["analysis_ratio"],
         "growth": grow,
         "peak_memory_mb": memory,
+        "linalg": linalg,
         "steps_per_s": 1e6 / costs["sim_step_us"]["median"],
         "sweep": sweeps,
         "quick": quick,
@@ -283,6 +289,14 @@ the trajectory); it is read by row groups.
 | steps | MB |
 |---|---|
 {mem}
+
+## The step's linear algebra against BLAS and LAPACK
+
+Per call, inside compiled code, on the step's sizes, the two alternating within each repeat
+(`pipeline/bench_linalg.py`); own / library is the median of the per-repeat ratios [min–max].
+The own kernels give the same bits on every processor; LAPACK's do not.
+
+{linalg_markdown(r["linalg"]) if "linalg" in r else "(not measured)"}
 
 ## Sweep throughput (32 points: 8 dt × 4 bus D, 20-s nominal missions)
 

@@ -77,7 +77,7 @@ LAYERS = (
     ("orchestrate",),
     ("claims",),
     ("reports",),
-    ("bench", "validate", "compile", "cli", "__main__"),
+    ("bench", "bench_linalg", "validate", "compile", "cli", "__main__"),
 )
 RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 
