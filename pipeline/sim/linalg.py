@@ -232,12 +232,14 @@ def eigvalsh(S: np.ndarray) -> np.ndarray:
 
 
 @jit
-def _orthogonalise_rows(B: np.ndarray, W: np.ndarray, with_vectors: bool) -> None:
+def _orthogonalise_rows(B: np.ndarray, W: np.ndarray) -> None:
     """One-sided Jacobi in place: rotate pairs of B's rows until every pair is orthogonal to
     working precision, |b_i · b_j| <= √m ε ‖b_i‖ ‖b_j‖ (LAPACK dgesvj's tolerance: a computed
     dot product of length m carries about √m ε of rounding), applying each rotation to W's
-    rows too when ``with_vectors``."""
+    rows too unless W is empty (no literal flag: a literal would compile one specialisation
+    per value)."""
     n, m = B.shape
+    with_vectors = W.shape[0] > 0
     tol = math.sqrt(m) * EPS
     for _ in range(MAX_SWEEPS):
         rotated = False
@@ -291,7 +293,7 @@ def singular_values(A: np.ndarray) -> np.ndarray:
         return np.full(k, np.nan)
     # The rows to orthogonalise: A's columns (Aᵀ's rows) when A is tall, else A's rows.
     B = np.ascontiguousarray(A.T) if m >= n else A.copy()
-    _orthogonalise_rows(B, np.empty((0, 0)), False)
+    _orthogonalise_rows(B, np.empty((0, 0)))
     s = _row_norms(B)
     return s[_descending(s)]
 
@@ -315,7 +317,7 @@ def svd(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return U, s, Vt
     B = np.ascontiguousarray(A.T)
     W = np.eye(n)
-    _orthogonalise_rows(B, W, True)
+    _orthogonalise_rows(B, W)
     norms = _row_norms(B)
     order = _descending(norms)
     for c in range(n):
