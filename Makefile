@@ -11,7 +11,7 @@ MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 
 .PHONY: help all setup compile lock runs analyses report claims claims-ci test lint sweep bench
-.PHONY: baselines repin clean slurm-up slurm-down
+.PHONY: baselines repin tolerances clean slurm-up slurm-down
 
 .DEFAULT_GOAL := all
 
@@ -24,7 +24,7 @@ unexport PYTHONDONTWRITEBYTECODE
 ## help: list the targets, one line each (from the `## target: …` comments of this file)
 help:
 	@awk '/^## [a-z-]+: / { sub(/^## /, ""); split($$0, a, ": "); \
-		printf "  make %-10s %s\n", a[1], substr($$0, length(a[1]) + 3) }' $(firstword $(MAKEFILE_LIST))
+		printf "  make %-11s %s\n", a[1], substr($$0, length(a[1]) + 3) }' $(firstword $(MAKEFILE_LIST))
 
 # One process (`python -m pipeline all`): the kernels compiled once, on both cores (a no-op
 # once done); the claims (they run what is missing, the sweeps included; each mission,
@@ -132,6 +132,13 @@ baselines: $(STAMP)
 ## repin: re-pin the baseline logs under logs/baselines/ (deliberately, with a reason)
 repin: $(STAMP)
 	$(PY) -m pipeline.claims.baselines repin
+
+# The baselines' per-column tolerances on another platform, measured (about 90 s here): each
+# baseline re-run under the OpenBLAS kernels this CPU runs and one-ulp perturbations of its
+# state; docs/reproducibility.md. After a re-pin, with the same commit.
+## tolerances: measure the baselines' cross-platform tolerances -> logs/baselines/tolerances.json
+tolerances: $(STAMP)
+	$(PY) -m pipeline.claims.baselines tolerances
 
 # Compiled kernels: all but the newest cache folder (one per version of pipeline/sim/*.py).
 ## clean: remove generated logs, reports and all but the newest compiled kernels

@@ -21,6 +21,7 @@ import pyarrow.parquet as pq
 
 from pipeline.errors import LogDamaged, LogError, OutputError, SpecError
 from pipeline.paths import find_on_search_path
+from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
 from pipeline.spec import Spec, build_spec, canonical_hash
 
@@ -53,6 +54,9 @@ class LogMeta:
     error: str
     rows: int = -1  # the number of rows written, as the writer counted them
     versions: dict | None = None  # Python's and the numerical libraries' versions
+    # The platform it ran on (pipeline.platform.Platform.to_dict()); None in a log written
+    # before logs recorded it: an unknown platform.
+    platform: dict | None = None
 
     @property
     def name(self) -> str:
@@ -196,6 +200,8 @@ def log_metadata(meta: LogMeta) -> dict[str, str]:
         "pipeline.rows": str(meta.rows),
         "pipeline.versions": json.dumps(meta.versions or library_versions(SIM_LIBRARIES),
                                         sort_keys=True),
+        "pipeline.platform": json.dumps(meta.platform or fingerprint().to_dict(),
+                                        sort_keys=True),
     }
 
 
@@ -239,7 +245,21 @@ def read_meta(path: Path) -> LogMeta:
                        f"mapping")
     return LogMeta(spec, md["pipeline.spec_hash"], md["pipeline.sim_version"],
                    md["pipeline.robot_file"], md["pipeline.robot_hash"], md["pipeline.status"],
-                   failed_step, md.get("pipeline.error", ""), rows, versions)
+                   failed_step, md.get("pipeline.error", ""), rows, versions,
+                   _platform(path, md.get("pipeline.platform")))
+
+
+def _platform(path: Path, text: str | None) -> dict | None:
+    """The recorded platform; None (unknown) for a log written before logs recorded one."""
+    if text is None:
+        return None
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError:
+        raise LogError(f"{path}: metadata key pipeline.platform is not JSON") from None
+    if not isinstance(record, dict):
+        raise LogError(f"{path}: metadata key pipeline.platform is not a mapping")
+    return record
 
 
 def num_rows(path: Path) -> int:

@@ -162,10 +162,16 @@ class Context:
 
     def baselines(self) -> dict:
         if self._baselines is None:
-            from pipeline.claims.baselines import PINNED, baseline_names, ensure_report
+            from pipeline.claims.baselines import (
+                PINNED,
+                TOLERANCES,
+                baseline_names,
+                ensure_report,
+            )
 
             self._baselines = ensure_report(self.out)
-            self.files += [self.out / "baselines.json",
+            tolerances = [PINNED / TOLERANCES] if (PINNED / TOLERANCES).is_file() else []
+            self.files += [self.out / "baselines.json", *tolerances,
                            *(PINNED / n / "run.parquet" for n in baseline_names())]
         return self._baselines
 

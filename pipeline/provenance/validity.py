@@ -16,6 +16,7 @@ import pyarrow.parquet as pq
 from pipeline.analysis.record import try_read_analysis
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.platform import platform_key
 from pipeline.provenance.keys import (
     ANALYSIS_LIBRARIES,
     REPORT_LIBRARIES,
@@ -35,7 +36,14 @@ FINISHED = ("complete", "failed", "diverged")  # a run that ended (a failed one 
 def current_log(path: Path, spec: Spec) -> LogMeta | None:
     """The log's metadata if it is a finished run of this spec (content hash), this robot
     file (content hash) and this simulator (sources and libraries), else None. A
-    ``complete`` log must hold every step."""
+    ``complete`` log must hold every step.
+
+    The platform it ran on (``pipeline.platform``) is recorded but is not part of the key: a
+    log made on another processor is still this code's valid result, equal to what this one
+    would make within the contract's tolerances (docs/reproducibility.md), and re-simulating
+    every log on every machine that reads a shared logs folder would buy nothing but churn.
+    What does depend on the platform, the verdict of the pinned baselines, is keyed on it
+    (:func:`current_baselines`, and the claims through their key)."""
     try:
         meta = read_meta(path)
         rows = num_rows(path)
@@ -91,12 +99,17 @@ def current_sweep(table: Path, base_spec_hash: str, points: Iterable[str]) -> bo
             and bool((df["status"] == "complete").all()))
 
 
-def current_baselines(path: Path, names: list[str], pinned_dir: Path) -> dict | None:
-    """``baselines.json`` if it re-ran these baselines with this simulator against these
-    pinned files (by hash), else None."""
+def current_baselines(path: Path, names: list[str], pinned_dir: Path,
+                      tolerances: Path | None = None) -> dict | None:
+    """``baselines.json`` if it re-ran these baselines with this simulator, on this platform
+    (its verdict, bitwise or within tolerance, is about the platform it ran on), against these
+    pinned files and this tolerances file (by hash; None: absent), else None."""
+    tol = None if tolerances is None or not Path(tolerances).is_file() else file_digest(
+        tolerances)
     try:
         old = json.loads(Path(path).read_text())
         ok = (old["sim_version"] == sim_version() and sorted(old["baselines"]) == names
+              and old["platform_key"] == platform_key() and old["tolerances_sha256"] == tol
               and all(file_digest(Path(pinned_dir) / n / "run.parquet")
                       == old["baselines"][n].get("pinned_sha256") for n in names))
     except (OSError, KeyError, json.JSONDecodeError, TypeError, AttributeError):
@@ -138,10 +151,12 @@ def claims_key(sources: dict[str, str], files: Iterable[Path]) -> str:
     its specs and robots, :func:`pipeline.claims.register.register_sources`), the bytes of
     every artefact the evaluation read or wrote (logs, analyses, sweep tables, baselines, the
     cross-check and equations, claims.json and the CLAIMS pages), the package's sources (the
-    cross-check inspects them all) and the libraries."""
+    cross-check inspects them all), the libraries and the platform."""
     libraries = library_versions(dict.fromkeys(SIM_LIBRARIES + ANALYSIS_LIBRARIES
                                                + REPORT_LIBRARIES))
+    # The platform too: the baselines' verdict (claim C8) is about the platform it ran on.
     return json.dumps({"source_version": source_version(), "libraries": libraries,
+                       "platform": platform_key(),
                        "sources": sources,
                        "files": {str(Path(p).resolve()): file_digest(p) for p in files}},
                       sort_keys=True, indent=1)
