@@ -116,8 +116,11 @@ def judge(cmp: dict, pinned_platform: dict | None, here: Platform,
                 "holds": not cmp["notes"] and cmp["max_abs_diff"] == 0.0, "exceeding": []}
     differ = (f"; differs in {', '.join(differences(pinned, here))}" if pinned is not None
               else "")
-    why = (f"within tolerance: pinned on {describe(pinned_platform)}, here {here.summary()}"
-           f"{differ}")
+    # Equal bits on another platform are the contract's best case, and worth saying: the
+    # simulator's own kernels are meant to give exactly that (docs/reproducibility.md).
+    bitwise = " (bitwise all the same)" if not cmp["notes"] and cmp["max_abs_diff"] == 0.0 else ""
+    why = (f"within tolerance{bitwise}: pinned on {describe(pinned_platform)}, here "
+           f"{here.summary()}{differ}")
     if tolerances is None:
         return {"comparison": "tolerance", "why": why, "holds": False, "exceeding": [],
                 "worst_ratio": float("inf"),
