@@ -43,18 +43,13 @@ import pyarrow.parquet as pq
 from pipeline.analysis import signals
 from pipeline.analysis.stages import Window, rebuild_and_project
 from pipeline.bench_linalg import linalg_costs, linalg_markdown
+from pipeline.bench_linalg import summary as _stats
 from pipeline.logs import atomic_write_text, file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
 from pipeline.spec import Spec, canonical_hash, load_spec, with_overrides
 from pipeline.sweep.throughput import sweep_throughput
-
-
-def _stats(samples: list[float]) -> dict:
-    a = np.asarray(samples, dtype=float)
-    return {"median": float(np.median(a)), "min": float(a.min()), "max": float(a.max()),
-            "repeats": len(a)}
 
 
 def floor_once(robot: GiordanoRobot, q: np.ndarray, v: np.ndarray) -> float:

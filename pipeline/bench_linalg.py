@@ -143,12 +143,14 @@ def linalg_costs(repeats: int, calls: int = CALLS, seed: int = 0) -> dict[str, d
                 loop(calls, *args)
                 t.append((time.perf_counter() - t0) / calls * 1e6)
         own_us, lib_us = np.asarray(times[0]), np.asarray(times[1])
-        out[name] = {key: _stats(x) for key, x in
+        out[name] = {key: summary(x) for key, x in
                      (("own_us", own_us), ("library_us", lib_us), ("ratio", own_us / lib_us))}
     return out
 
 
-def _stats(a: np.ndarray) -> dict:
+def summary(samples) -> dict:
+    """Median, min and max of repeated measurements, and how many (``make bench``'s figures)."""
+    a = np.asarray(samples, dtype=float)
     return {"median": float(np.median(a)), "min": float(a.min()), "max": float(a.max()),
             "repeats": len(a)}
 
