@@ -3,9 +3,11 @@ reaching their walltime mid-sweep (graceful retirement, and SLURM's hard kill), 
 ``sbatch``.
 
 SLURM comes from ``scripts/slurm-local.sh`` (Debian's munge, slurmctld, slurmd on localhost);
-``.ci/run`` and ``make slurm-up`` start it, and the ``slurm_up`` fixture starts it when it is
-installed but down (and stops it again). Without the packages or root the tests skip, saying
-why; under ``CI=true`` such a skip fails the run (tests/conftest.py).
+``.ci/run`` (in a folder of its own, ``BREVE_SLURM_DIR``) and ``make slurm-up`` (this
+checkout's folder) start it, and the ``slurm_up`` fixture, when neither answers, starts one of
+its own in a fresh folder with its own ports (and stops it again). Without the packages or
+root the tests skip, saying why; under ``CI=true`` such a skip fails the run
+(tests/conftest.py).
 
 SLURM's walltime is whole minutes, checked by slurmctld about every 30 s, and its kill waits
 ``KillWait`` (5 s here) between SIGTERM and SIGKILL: the walltime tests use a 1-minute limit
@@ -19,6 +21,7 @@ import os
 import re
 import shutil
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -33,28 +36,47 @@ SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
 LOCAL = {"DASK_JOBQUEUE__SLURM__INTERFACE": "lo"}
 
 
-def _status() -> bool:
-    return subprocess.run([str(SCRIPT), "status"], capture_output=True, timeout=30).returncode == 0
+def _script(*args: str, env: dict[str, str], timeout: float = 30
+            ) -> subprocess.CompletedProcess:
+    return subprocess.run([str(SCRIPT), *args], capture_output=True, text=True, env=env,
+                          timeout=timeout)
 
 
 @pytest.fixture(scope="module")
 def slurm_up():
-    """A running local SLURM, or a skip that says why."""
+    """A running local SLURM, or a skip that says why. The cluster of ``BREVE_SLURM_DIR`` if
+    set, else this checkout's (``make slurm-up``), when it answers; else, as root, one of this
+    test run's own, in a fresh folder with its own ports, stopped and removed afterwards, so
+    that no other run's cluster is used or stopped. The sweeps find it by ``SLURM_CONF``."""
     missing = [c for c in ("munged", "slurmctld", "slurmd", "sbatch") if not shutil.which(c)]
     if missing:
         pytest.skip(f"SLURM packages missing ({', '.join(missing)} not found): "
                     "apt-get install munge slurmctld slurmd slurm-client, or make slurm-up")
-    started = False
-    if not _status():
+    env = dict(os.environ)
+    started, own = False, None
+    if _script("status", env=env).returncode != 0:
         if os.geteuid() != 0:
             pytest.skip("local SLURM not running and not root to start it: make slurm-up as root")
-        r = subprocess.run([str(SCRIPT), "up"], capture_output=True, text=True, timeout=120)
-        if r.returncode != 0:
-            pytest.fail(f"scripts/slurm-local.sh up failed: {r.stderr.strip()}")
+        if not env.get("BREVE_SLURM_DIR"):
+            own = tempfile.mkdtemp(prefix="breve-slurm.")
+            env["BREVE_SLURM_DIR"] = own
         started = True
+        r = _script("up", env=env, timeout=120)
+        if r.returncode != 0:
+            _script("down", env=env, timeout=120)
+            pytest.fail(f"scripts/slurm-local.sh up failed: {r.stderr.strip()}")
+    saved = os.environ.get("SLURM_CONF")
+    # the sweeps' sbatch, squeue and scancel talk to this cluster, whatever /etc/slurm says
+    os.environ["SLURM_CONF"] = _script("conf", env=env).stdout.strip()
     yield
+    if saved is None:
+        os.environ.pop("SLURM_CONF", None)
+    else:
+        os.environ["SLURM_CONF"] = saved
     if started:
-        subprocess.run([str(SCRIPT), "down"], capture_output=True, timeout=120)
+        _script("down", env=env, timeout=120)
+        if own is not None:
+            shutil.rmtree(own, ignore_errors=True)
 
 
 def _jobs(stdout: str) -> list[str]:
