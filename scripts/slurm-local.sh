@@ -77,7 +77,9 @@ pick_ports() {  # sets CTLD_PORT and SLURMD_PORT: free, from a hash of $DIR, 2 a
 write_conf() {
     local host cpus mem
     host=$(hostname -s)
-    cpus=$(nproc)
+    # the cores this process may use, whatever OMP_NUM_THREADS says: GNU nproc obeys it, and a
+    # test process that ran a Dask nanny has it set to 1 (a one-CPU node ran one job at a time)
+    cpus=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
     # MiB, less 10 % for the system: a job's --mem up to this is accepted
     mem=$(awk '/^MemTotal:/ {printf "%d", $2 / 1024 * 0.9}' /proc/meminfo)
     cat >"$CONF.tmp" <<EOF
