@@ -9,10 +9,14 @@ its own in a fresh folder with its own ports (and stops it again). Without the p
 root the tests skip, saying why; under ``CI=true`` such a skip fails the run
 (tests/conftest.py).
 
-SLURM's walltime is whole minutes, checked by slurmctld about every 30 s, and its kill waits
-``KillWait`` (5 s here) between SIGTERM and SIGKILL: the walltime tests use a 1-minute limit
-and a sweep of about two minutes of work on two one-core jobs, so that every first job ends
-mid-sweep.
+SLURM's walltime is whole minutes (1 minute is the shortest: a limit in seconds is rounded up
+to one), checked by slurmctld every 30 s, and its kill waits ``KillWait`` (5 s here) between
+SIGTERM and SIGKILL: a job of a 1-minute limit is killed 60 to 90 s after it starts (measured
+here: 65 and 72 s for two jobs of one check). The hard-kill test therefore gives its two
+one-core jobs about two minutes of work, so that every first job is killed mid-sweep. The
+retirement test does not need SLURM's clock: its workers retire after ``--lifetime 15`` (the
+default for a 1-minute walltime, 40 ± 3 s, is ``default_lifetime``'s, tested in
+tests/test_sweep.py), long before the limit, on half a minute of work each.
 """
 
 from __future__ import annotations
@@ -115,9 +119,10 @@ def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
 def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
                     ) -> tuple[list[str], dict]:
     """12 × ``gains`` points on two jobs of a 1-minute walltime: every point must complete
-    although the first jobs end mid-sweep. A point is a 250-s mission at dt ≈ 0.025 s, about
-    2.5 s of work on an idle core (10 000 steps at ~0.25 ms): well below a worker's lifetime
-    even on a loaded host, so that a retiring worker hands back little work."""
+    although the first jobs end mid-sweep (``lifetime``: the sweep's ``--lifetime`` option).
+    A point is a 250-s mission at dt ≈ 0.025 s, about 2.5 s of work on an idle core (10 000
+    steps at ~0.25 ms): well below a worker's lifetime even on a loaded host, so that a
+    retiring worker hands back little work."""
     dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
     ds = ",".join(f"{1.0 + 0.25 * i:g}" for i in range(gains))
     t0 = time.monotonic()
@@ -140,10 +145,10 @@ def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
 
 
 def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
-    """Worker lifetime 40 ± 3 s (the default for a 1-minute walltime): each worker retires
+    """Worker lifetime 15 ± 2 s, a quarter of the 1-minute walltime: each worker retires
     gracefully before SLURM's limit and adapt submits a replacement job."""
-    # 48 points, ~120 s of work, ~60 s on two workers: past the first retirements at ~45 s
-    jobs, logs = _walltime_sweep(tmp_path, 4, [], record_property)
+    # 24 points, ~60 s of work, ~30 s on two workers: past the first retirements at ~15 s
+    jobs, logs = _walltime_sweep(tmp_path, 2, ["--lifetime", "15"], record_property)
     assert set(logs) <= set(jobs)
     assert any("worker-lifetime-reached" in text for text in logs.values()), logs
     assert not any("DUE TO TIME LIMIT" in text for text in logs.values())
