@@ -104,7 +104,7 @@ PYTEST_RC5 := rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; f
 test: $(STAMP)
 	$(PY) -m pytest -q -m "$(FAST)"; $(PYTEST_RC5)
 
-## test-all: run every test, as CI does (.ci/run; the SLURM tests want make slurm-up)
+## test-all: run every test, as CI does (.ci/run; SLURM tests: make slurm-up, or root)
 test-all: $(STAMP)
 	$(PY) -m pytest -q; $(PYTEST_RC5)
 
