@@ -10,7 +10,8 @@ REPORTS := generated_reports
 MISSIONS := nominal omega_ripple_dt010 omega_ripple_imex omega_ripple_reach \
 	servicer_nominal servicer_dt010 servicer_imex
 
-.PHONY: help all setup compile lock runs analyses report claims claims-ci test lint sweep bench
+.PHONY: help all setup compile lock runs analyses report claims claims-ci test test-all lint
+.PHONY: sweep bench
 .PHONY: baselines repin tolerances clean slurm-up slurm-down
 
 .DEFAULT_GOAL := all
@@ -92,9 +93,20 @@ claims: $(STAMP)
 claims-ci: $(STAMP)
 	$(PY) -m pipeline claims --claims claims_ci --out $(REPORTS)/ci
 
-## test: run the test suite (pytest)
+# The fast set leaves out what needs SLURM, a browser, a fresh install or a compile into an
+# empty cache, and the slow tests (markers in pyproject.toml); test-all, what .ci/run calls,
+# runs everything. The kernels are compiled once per session, before the first test
+# (tests/conftest.py: the compile stage, a no-op when up to date). pytest's exit code 5 (no
+# tests collected, e.g. every one deselected) is not a failure.
+FAST := not slow and not slurm and not browser and not install and not compile
+PYTEST_RC5 := rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; exit $$rc
+## test: run the fast tests (pytest; no SLURM, browser, fresh install, full compile, slow)
 test: $(STAMP)
-	$(PY) -m pytest -q; rc=$$?; if [ $$rc -eq 5 ]; then echo "no tests collected"; rc=0; fi; exit $$rc
+	$(PY) -m pytest -q -m "$(FAST)"; $(PYTEST_RC5)
+
+## test-all: run every test, as CI does (.ci/run; SLURM tests: make slurm-up, or root)
+test-all: $(STAMP)
+	$(PY) -m pytest -q; $(PYTEST_RC5)
 
 ## lint: check the code with ruff
 lint: $(STAMP)
@@ -114,8 +126,9 @@ sweep: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m pipeline bench --out $(REPORTS)
 
-# A single-node SLURM on localhost (Debian's munge, slurmctld, slurmd; state in /tmp/breve-slurm)
-# for the SLURM tests (pytest -m slurm) and the sweep throughput of `make bench`.
+# A single-node SLURM on localhost (Debian's munge, slurmctld, slurmd) for the SLURM tests
+# (pytest -m slurm) and the sweep throughput of `make bench`; its state in one folder per
+# checkout, /tmp/breve-slurm-<hash of the checkout's path> (BREVE_SLURM_DIR), with its own ports.
 ## slurm-up: start a single-node SLURM on localhost (installs Debian's packages; root)
 slurm-up:
 	scripts/slurm-local.sh install

@@ -4,25 +4,32 @@
 #   scripts/slurm-local.sh up       # munged, slurmctld, slurmd; waits until the node is idle
 #   scripts/slurm-local.sh down     # stops the daemons this script started, nothing else
 #   scripts/slurm-local.sh status   # exit 0 when the local SLURM answers
+#   scripts/slurm-local.sh conf     # print its slurm.conf (for SLURM_CONF)
 #   scripts/slurm-local.sh install  # apt-get install munge slurmctld slurmd slurm-client
 #
-# Everything lives under $BREVE_SLURM_DIR (default /tmp/breve-slurm): its own munge key and
-# socket, slurm.conf, spool, state, logs and pid files; no accounting. `up` is idempotent: a
-# daemon whose pid file names a live process is left running. /etc/slurm/slurm.conf is a
-# symlink to our slurm.conf only if no other slurm.conf was there (so that sbatch, squeue and
-# dask-jobqueue find the cluster without SLURM_CONF); `down` removes only that symlink.
+# Everything lives under $BREVE_SLURM_DIR: its own munge key and socket, slurm.conf, spool,
+# state, logs and pid files; no accounting. The default folder is one per checkout,
+# /tmp/breve-slurm-<8 hex digits of the checkout's path>, so that `make slurm-up`, the tests
+# and `make slurm-down` of one checkout find the same cluster and another checkout's runs
+# never stop it; `.ci/run` and the tests' own cluster use a fresh folder per run (mktemp).
+# Each cluster has its own pair of ports (slurmctld, slurmd), chosen free at `up` from
+# 20000-31999 by a hash of the folder (BREVE_SLURM_CTLD_PORT, BREVE_SLURM_SLURMD_PORT override),
+# and kept in its slurm.conf while it runs. `up` is idempotent: a daemon whose pid file names
+# a live process is left running. /etc/slurm/slurm.conf is a symlink to our slurm.conf only
+# if no other slurm.conf was there (so that sbatch, squeue and dask-jobqueue find the first
+# cluster without SLURM_CONF); with several clusters up, set SLURM_CONF=$(... conf) (the
+# tests do); `down` removes only that symlink.
 #
 # Settings that a single node without systemd needs (docs/sweeps.md): proctrack/linuxproc and
 # task/none (no cgroups), RealMemory from /proc/meminfo (so that `--mem` is accepted), the node
 # name from `hostname -s`, KillWait=5 (a job at its walltime is SIGKILLed 5 s after SIGTERM).
 set -euo pipefail
 
-DIR=${BREVE_SLURM_DIR:-/tmp/breve-slurm}
+ROOT=$(cd "$(dirname "$0")/.." && pwd -P)
+DIR=${BREVE_SLURM_DIR:-/tmp/breve-slurm-$(printf %s "$ROOT" | sha1sum | cut -c1-8)}
 CONF=$DIR/slurm.conf
 SOCK=$DIR/munge/munge.socket.2
 ETC_CONF=/etc/slurm/slurm.conf
-CTLD_PORT=${BREVE_SLURM_CTLD_PORT:-6817}
-SLURMD_PORT=${BREVE_SLURM_SLURMD_PORT:-6818}
 PACKAGES="munge slurmctld slurmd slurm-client"
 
 say() { echo "slurm-local: $*" >&2; }
@@ -44,10 +51,35 @@ install_packages() {
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $PACKAGES >/dev/null
 }
 
+listening() {  # listening PORT: something accepts TCP connections on it (bash's /dev/tcp)
+    (exec 3<>"/dev/tcp/127.0.0.1/$1") 2>/dev/null
+}
+
+conf_port() {  # conf_port KEY: the port of our slurm.conf (a cluster that is up keeps its own)
+    sed -n "s/^$1=//p" "$CONF" 2>/dev/null | head -1
+}
+
+pick_ports() {  # sets CTLD_PORT and SLURMD_PORT: free, from a hash of $DIR, 2 apart per try
+    local base i
+    if [ -n "${BREVE_SLURM_CTLD_PORT:-}" ] || [ -n "${BREVE_SLURM_SLURMD_PORT:-}" ]; then
+        CTLD_PORT=${BREVE_SLURM_CTLD_PORT:-6817}; SLURMD_PORT=${BREVE_SLURM_SLURMD_PORT:-6818}
+        return 0
+    fi
+    # 20000-31999: below Linux's ephemeral ports (32768-60999), which outgoing connections take
+    base=$(( 2 * ($(printf %s "$DIR" | cksum | cut -d' ' -f1) % 6000) ))
+    for i in $(seq 0 49); do
+        CTLD_PORT=$(( 20000 + (base + 2 * i) % 12000 )); SLURMD_PORT=$((CTLD_PORT + 1))
+        if ! listening "$CTLD_PORT" && ! listening "$SLURMD_PORT"; then return 0; fi
+    done
+    say "no free pair of ports found from $((20000 + base))"; return 1
+}
+
 write_conf() {
     local host cpus mem
     host=$(hostname -s)
-    cpus=$(nproc)
+    # the cores this process may use, whatever OMP_NUM_THREADS says: GNU nproc obeys it, and a
+    # test process that ran a Dask nanny has it set to 1 (a one-CPU node ran one job at a time)
+    cpus=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
     # MiB, less 10 % for the system: a job's --mem up to this is accepted
     mem=$(awk '/^MemTotal:/ {printf "%d", $2 / 1024 * 0.9}' /proc/meminfo)
     cat >"$CONF.tmp" <<EOF
@@ -111,7 +143,13 @@ up() {
     fi
     mkdir -p "$DIR/ctld" "$DIR/spool"
     chmod 755 "$DIR"
-    write_conf
+    if alive "$DIR/slurmctld.pid" || alive "$DIR/slurmd.pid"; then
+        # running: its slurm.conf, ports included, stays as it is
+        CTLD_PORT=$(conf_port SlurmctldPort); SLURMD_PORT=$(conf_port SlurmdPort)
+    else
+        pick_ports
+        write_conf
+    fi
     if [ ! -e "$ETC_CONF" ] && [ ! -L "$ETC_CONF" ]; then
         mkdir -p "$(dirname "$ETC_CONF")"
         ln -s "$CONF" "$ETC_CONF"
@@ -130,7 +168,8 @@ up() {
     for i in $(seq 1 60); do
         state=$(sinfo -h -N -o '%t' 2>/dev/null | head -1 || true)
         case "$state" in
-            idle|mix|alloc) say "up: node $(hostname -s) $state (SLURM_CONF=$CONF)"; return 0 ;;
+            idle|mix|alloc) say "up: node $(hostname -s) $state, ports $CTLD_PORT/$SLURMD_PORT" \
+                                    "(SLURM_CONF=$CONF)"; return 0 ;;
             drain*|down*) scontrol update nodename="$(hostname -s)" state=resume 2>/dev/null || true ;;
         esac
         sleep 1
@@ -170,6 +209,7 @@ case "${1:-}" in
     up) up ;;
     down) down ;;
     status) status ;;
+    conf) echo "$CONF" ;;
     install) install_packages ;;
-    *) echo "usage: $0 up|down|status|install" >&2; exit 2 ;;
+    *) echo "usage: $0 up|down|status|conf|install" >&2; exit 2 ;;
 esac

@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +77,42 @@ def footer_metadata(path: Path) -> dict[bytes, bytes]:
     from pipeline.logs import file_metadata
 
     return {k.encode(): v.encode() for k, v in file_metadata(path).items()}
+
+
+# -- The kernels: compiled once per session, before the first test ---------------------------
+
+_COMPILE_FAILED: list[str] = []  # the compile stage's error, raised again by every test
+
+
+def pytest_collection_finish(session):
+    """Run the compile stage (``python -m pipeline compile``, pipeline/compile.py) once, after
+    collection and before the first test, so that no test pays for compiling a kernel (a
+    cold cache took 50 s on two processes; then ``compile: up to date``, about a second).
+    Its last line goes to the terminal. Not for ``--collect-only`` or an empty selection;
+    under ``NUMBA_DISABLE_JIT=1`` the stage says it skips. A failure is raised by
+    :func:`_kernels_compiled` in every test, with the stage's own message."""
+    if session.config.option.collectonly or not session.items:
+        return
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-m", "pipeline", "compile"], cwd=PROJECT_ROOT,
+                       capture_output=True, text=True, timeout=900)
+    lines = r.stderr.strip().splitlines() or ["compile: (no output)"]
+    if r.returncode != 0:
+        _COMPILE_FAILED.append(f"the compile stage failed (exit {r.returncode}): "
+                               + "\n".join(lines[-20:]))
+    tr = session.config.pluginmanager.get_plugin("terminalreporter")
+    line = f"tests: {lines[-1]} ({time.monotonic() - t0:.1f} s, before the first test)"
+    if tr is not None:
+        tr.write_line(line)
+    else:
+        print(line, file=sys.stderr)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _kernels_compiled():
+    """Every test: the kernels were compiled before it (pytest_collection_finish)."""
+    if _COMPILE_FAILED:
+        pytest.fail(_COMPILE_FAILED[0], pytrace=False)
 
 
 # -- SLURM tests: CI must run them -----------------------------------------------------------

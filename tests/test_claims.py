@@ -35,6 +35,7 @@ def claim(cid: str, metric: str, op: str, threshold, expect: str = "hold", **kw)
             "checks": [{"metric": metric, "op": op, "threshold": threshold}], **kw}
 
 
+@pytest.mark.slow
 def test_a_threshold_the_data_cannot_meet_fails_and_names_the_claim(tmp_path):
     path = claims_file(tmp_path, [
         claim("K1", "nominal:dominant.lag1", "lt", -0.5),
@@ -114,7 +115,10 @@ def test_a_current_register_is_reused_with_the_same_lines_and_exit_code(tmp_path
     assert "claims: started" in forced.stderr and forced.stdout == first.stdout
 
 
-@pytest.mark.parametrize("victim", ["log", "analysis", "claims.json", "CLAIMS.md", "key"])
+# one victim in the fast set; the others, about 6 s each, with the slow tests
+@pytest.mark.parametrize("victim", ["log", *(pytest.param(v, marks=pytest.mark.slow)
+                                            for v in ("analysis", "claims.json", "CLAIMS.md",
+                                                      "key"))])
 def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
     b = built()
     logs = tmp_path / "logs"  # a copy: the shared test runs stay whole
@@ -155,6 +159,7 @@ def test_the_claims_key_follows_the_specs_the_register_finds(tmp_path):
     assert register_sources(load_claims(path))["register"] != shadowed["register"]
 
 
+@pytest.mark.slow
 def test_a_sweep_of_the_claims_runs_in_the_background_with_its_output_kept(tmp_path):
     b = built()
     path = tmp_path / "claims.yaml"

@@ -8,6 +8,7 @@ import pickle
 import subprocess
 import sys
 
+import pytest
 from numba.core.registry import CPUDispatcher
 
 from pipeline import compile as kc
@@ -63,6 +64,7 @@ print(sorted(f"{m}.{k}" for m, mod in list(sys.modules.items()) if m.startswith(
 """
 
 
+@pytest.mark.compile  # every kernel again, into a fresh cache: about a minute on two cores
 def test_from_an_empty_cache_the_stage_compiles_each_kernel_once_and_then_nothing_compiles(
         tmp_path):
     """The stage as `make all` runs it (two processes taking the units in turn) into an empty
@@ -89,7 +91,6 @@ def test_a_slice_assigned_from_the_wrong_shape_still_raises_value_error():
     """pipeline.sim.jit swaps the message of Numba's shape check for its plain one (a cheaper
     compile); the check itself stays: a wrong shape is a ValueError, a right one assigns."""
     import numpy as np
-    import pytest
     from numba import njit
 
     import pipeline.sim.jit  # noqa: F401  (the swap happens on import)

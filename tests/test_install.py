@@ -21,7 +21,7 @@ import pytest
 
 from pipeline.paths import PROJECT_ROOT, SHIPPED_SPECS
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.install
 
 MISSION = """\
 # the user's own mission: the shipped nominal, the user's robot file, 1 s

@@ -256,6 +256,7 @@ def test_the_note_eigenvalue_is_the_note_order_of_the_bus_yaw():
 
 # -- divergence -----------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_unbounded_mission_ends_diverged_with_the_bound_and_the_fix(tmp_path):
     r = run_cli("run", "omega_ripple_unbounded", "--out", str(tmp_path))
     assert r.returncode == 1, r.stderr
@@ -314,6 +315,7 @@ def test_note_table_puts_the_note_beside_our_values():
     assert note_rows(rec, other) and not note_rows(rec, {**other, "spec_name": "other"})
 
 
+@pytest.mark.slow
 def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
     """A diverged log's analysis is listed with its growth and drawn in its own figure; it is
     kept out of the figures its runaway would swamp."""

@@ -141,6 +141,7 @@ def test_bad_value_is_exit_2_one_line_and_nothing_written(tmp_path):
 
 # -- running, caching, resuming --------------------------------------------------------------
 
+@pytest.mark.slow
 def test_four_points_then_nothing_reruns_then_only_what_is_missing(tmp_path):
     r = sweep(tmp_path, "short_nominal", *FOUR, "--workers", "2")
     assert r.returncode == 0, r.stderr
@@ -198,6 +199,7 @@ def test_four_points_then_nothing_reruns_then_only_what_is_missing(tmp_path):
         assert_clean_valid(f, t3.loc[p, "spec_hash"])
 
 
+@pytest.mark.slow
 def test_diverging_point_is_a_failed_row_and_exit_1_naming_it(tmp_path):
     spec = tmp_path / "diverge.yaml"
     spec.write_text(DIVERGING_SPEC)
@@ -241,6 +243,7 @@ def _drain(fd: int, chunks: list[bytes]) -> None:
     os.close(fd)
 
 
+@pytest.mark.slow
 def test_killed_worker_does_not_lose_the_sweep(tmp_path):
     args = ["short_nominal", "--set", "mission.duration=3.0",
             "--set", "mission.dt=0.005,0.006,0.007,0.008", "--workers", "2"]
@@ -279,6 +282,7 @@ def test_killed_worker_does_not_lose_the_sweep(tmp_path):
         assert_clean_valid(tmp_path / "logs" / "s" / p, t.loc[p, "spec_hash"])
 
 
+@pytest.mark.slow
 def test_two_overlapping_sweeps_at_once_share_each_point_once(tmp_path):
     grids = {"a": "0.01,0.015,0.02", "b": "0.015,0.02,0.025"}
     procs = {k: subprocess.Popen(
@@ -347,6 +351,7 @@ def test_point_lock_excludes_and_survives_a_killed_holder(tmp_path):
 
 # -- where it runs ------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_exit_2_within_seconds(tmp_path):
     t0 = time.monotonic()
     r = sweep(tmp_path, "short_nominal", *SHORT, "--set", "mission.dt=0.02",

@@ -34,6 +34,7 @@ def _family(pid: int) -> set[int]:
         return set()
 
 
+@pytest.mark.slow
 def test_a_point_whose_worker_always_dies_is_named_and_the_others_complete(tmp_path):
     args = ["short_nominal", "--set", "mission.duration=4.0",
             "--set", "mission.dt=0.01,0.02,0.03", "--workers", "2"]
@@ -68,6 +69,7 @@ def test_a_point_whose_worker_always_dies_is_named_and_the_others_complete(tmp_p
     assert not list((tmp_path / "logs" / "s").rglob("*.tmp"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_cancels_the_queue_keeps_what_finished_and_writes_nothing_half(
         tmp_path, signum, code):
@@ -116,6 +118,7 @@ def test_a_signal_cancels_the_queue_keeps_what_finished_and_writes_nothing_half(
     assert f"{8 - finished} simulated now, {finished} from cache" in r.stdout
 
 
+@pytest.mark.slow
 def test_sweep_on_a_real_scheduler_that_outlives_it(tmp_path):
     info = tmp_path / "scheduler.json"
     env = sweep_env()

@@ -3,14 +3,20 @@ reaching their walltime mid-sweep (graceful retirement, and SLURM's hard kill), 
 ``sbatch``.
 
 SLURM comes from ``scripts/slurm-local.sh`` (Debian's munge, slurmctld, slurmd on localhost);
-``.ci/run`` and ``make slurm-up`` start it, and the ``slurm_up`` fixture starts it when it is
-installed but down (and stops it again). Without the packages or root the tests skip, saying
-why; under ``CI=true`` such a skip fails the run (tests/conftest.py).
+``.ci/run`` (in a folder of its own, ``BREVE_SLURM_DIR``) and ``make slurm-up`` (this
+checkout's folder) start it, and the ``slurm_up`` fixture, when neither answers, starts one of
+its own in a fresh folder with its own ports (and stops it again). Without the packages or
+root the tests skip, saying why; under ``CI=true`` such a skip fails the run
+(tests/conftest.py).
 
-SLURM's walltime is whole minutes, checked by slurmctld about every 30 s, and its kill waits
-``KillWait`` (5 s here) between SIGTERM and SIGKILL: the walltime tests use a 1-minute limit
-and a sweep of about two minutes of work on two one-core jobs, so that every first job ends
-mid-sweep.
+SLURM's walltime is whole minutes (1 minute is the shortest: a limit in seconds is rounded up
+to one), checked by slurmctld every 30 s, and its kill waits ``KillWait`` (5 s here) between
+SIGTERM and SIGKILL: a job of a 1-minute limit is killed 60 to 90 s after it starts (measured
+here: 65 and 72 s for two jobs of one check). The hard-kill test therefore gives its two
+one-core jobs about two minutes of work, so that every first job is killed mid-sweep. The
+retirement test does not need SLURM's clock: its workers retire after ``--lifetime 15`` (the
+default for a 1-minute walltime, 40 ± 3 s, is ``default_lifetime``'s, tested in
+tests/test_sweep.py), long before the limit, on half a minute of work each.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ import os
 import re
 import shutil
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -33,28 +40,47 @@ SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
 LOCAL = {"DASK_JOBQUEUE__SLURM__INTERFACE": "lo"}
 
 
-def _status() -> bool:
-    return subprocess.run([str(SCRIPT), "status"], capture_output=True, timeout=30).returncode == 0
+def _script(*args: str, env: dict[str, str], timeout: float = 30
+            ) -> subprocess.CompletedProcess:
+    return subprocess.run([str(SCRIPT), *args], capture_output=True, text=True, env=env,
+                          timeout=timeout)
 
 
 @pytest.fixture(scope="module")
 def slurm_up():
-    """A running local SLURM, or a skip that says why."""
+    """A running local SLURM, or a skip that says why. The cluster of ``BREVE_SLURM_DIR`` if
+    set, else this checkout's (``make slurm-up``), when it answers; else, as root, one of this
+    test run's own, in a fresh folder with its own ports, stopped and removed afterwards, so
+    that no other run's cluster is used or stopped. The sweeps find it by ``SLURM_CONF``."""
     missing = [c for c in ("munged", "slurmctld", "slurmd", "sbatch") if not shutil.which(c)]
     if missing:
         pytest.skip(f"SLURM packages missing ({', '.join(missing)} not found): "
                     "apt-get install munge slurmctld slurmd slurm-client, or make slurm-up")
-    started = False
-    if not _status():
+    env = dict(os.environ)
+    started, own = False, None
+    if _script("status", env=env).returncode != 0:
         if os.geteuid() != 0:
             pytest.skip("local SLURM not running and not root to start it: make slurm-up as root")
-        r = subprocess.run([str(SCRIPT), "up"], capture_output=True, text=True, timeout=120)
-        if r.returncode != 0:
-            pytest.fail(f"scripts/slurm-local.sh up failed: {r.stderr.strip()}")
+        if not env.get("BREVE_SLURM_DIR"):
+            own = tempfile.mkdtemp(prefix="breve-slurm.")
+            env["BREVE_SLURM_DIR"] = own
         started = True
+        r = _script("up", env=env, timeout=120)
+        if r.returncode != 0:
+            _script("down", env=env, timeout=120)
+            pytest.fail(f"scripts/slurm-local.sh up failed: {r.stderr.strip()}")
+    saved = os.environ.get("SLURM_CONF")
+    # the sweeps' sbatch, squeue and scancel talk to this cluster, whatever /etc/slurm says
+    os.environ["SLURM_CONF"] = _script("conf", env=env).stdout.strip()
     yield
+    if saved is None:
+        os.environ.pop("SLURM_CONF", None)
+    else:
+        os.environ["SLURM_CONF"] = saved
     if started:
-        subprocess.run([str(SCRIPT), "down"], capture_output=True, timeout=120)
+        _script("down", env=env, timeout=120)
+        if own is not None:
+            shutil.rmtree(own, ignore_errors=True)
 
 
 def _jobs(stdout: str) -> list[str]:
@@ -93,9 +119,10 @@ def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
 def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
                     ) -> tuple[list[str], dict]:
     """12 × ``gains`` points on two jobs of a 1-minute walltime: every point must complete
-    although the first jobs end mid-sweep. A point is a 250-s mission at dt ≈ 0.025 s, about
-    2.5 s of work on an idle core (10 000 steps at ~0.25 ms): well below a worker's lifetime
-    even on a loaded host, so that a retiring worker hands back little work."""
+    although the first jobs end mid-sweep (``lifetime``: the sweep's ``--lifetime`` option).
+    A point is a 250-s mission at dt ≈ 0.025 s, about 2.5 s of work on an idle core (10 000
+    steps at ~0.25 ms): well below a worker's lifetime even on a loaded host, so that a
+    retiring worker hands back little work."""
     dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
     ds = ",".join(f"{1.0 + 0.25 * i:g}" for i in range(gains))
     t0 = time.monotonic()
@@ -118,10 +145,10 @@ def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
 
 
 def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
-    """Worker lifetime 40 ± 3 s (the default for a 1-minute walltime): each worker retires
+    """Worker lifetime 15 ± 2 s, a quarter of the 1-minute walltime: each worker retires
     gracefully before SLURM's limit and adapt submits a replacement job."""
-    # 48 points, ~120 s of work, ~60 s on two workers: past the first retirements at ~45 s
-    jobs, logs = _walltime_sweep(tmp_path, 4, [], record_property)
+    # 24 points, ~60 s of work, ~30 s on two workers: past the first retirements at ~15 s
+    jobs, logs = _walltime_sweep(tmp_path, 2, ["--lifetime", "15"], record_property)
     assert set(logs) <= set(jobs)
     assert any("worker-lifetime-reached" in text for text in logs.values()), logs
     assert not any("DUE TO TIME LIMIT" in text for text in logs.values())
