@@ -37,18 +37,20 @@ def test_the_fingerprint_records_the_kernel_target_the_blas_kernels_and_the_thre
 
 
 def test_the_key_moves_with_what_decides_the_bits_and_only_with_it(here):
-    blas = tuple(dataclasses.replace(b, architecture="SkylakeX") for b in here.blas)
+    # Values other than this machine's, whichever processor runs the test.
+    blas = tuple(dataclasses.replace(b, architecture=f"not-{b.architecture}") for b in here.blas)
     threads = tuple(dataclasses.replace(b, num_threads=b.num_threads + 1) for b in here.blas)
     for changed in (dataclasses.replace(here, blas=blas),
                     dataclasses.replace(here, blas=threads),
-                    dataclasses.replace(here, kernel_cpu="skylake-avx512"),
-                    dataclasses.replace(here, cpu_flags=(*here.cpu_flags, "avx512f")),
+                    dataclasses.replace(here, kernel_cpu=f"not-{here.kernel_cpu}"),
+                    dataclasses.replace(here, cpu_flags=(*here.cpu_flags, "not-a-flag")),
                     dataclasses.replace(here, numba_threads=here.numba_threads + 1),
                     dataclasses.replace(here, libc="glibc 2.17")):
         assert changed.key() != here.key() and differences(here, changed)
     for informative in (dataclasses.replace(here, cpu_model="another CPU"),
                         dataclasses.replace(here, thread_env={"OMP_NUM_THREADS": "1"}),
-                        dataclasses.replace(here, openblas_coretype="Haswell")):
+                        dataclasses.replace(here,
+                                            openblas_coretype=f"not-{here.openblas_coretype}")):
         assert informative.key() == here.key() and not differences(here, informative)
 
 
