@@ -570,10 +570,18 @@ def test_servicer_ripple_is_the_camera_roll_not_the_bus(servicer_log):
 
 
 def test_pointing_and_coverage_agree_across_the_three(short_logs):
+    """Past the start the bus points within 1° and the three reach the same coverage.
+
+    "Past the start" is the camera on its aim: at q̄ the seed robot's camera looks about 90°
+    away from the aim point, and while the arm turns it (boresight error 90° to below 2° in
+    about 4 s) the reaction on the 5 kg bus tilts it by up to about 1.8°.
+    """
     cov = {}
     for name, path in short_logs.items():
-        c = read_columns(path, ["t", "pointing_err_deg", "coverage"])
-        assert c["pointing_err_deg"][c["t"] >= 2.0].max() < 1.0, name
+        c = read_columns(path, ["t", "pointing_err_deg", "boresight_err_deg", "coverage"])
+        on_aim = np.flatnonzero(c["boresight_err_deg"] < 2.0)
+        assert on_aim.size and c["t"][on_aim[0]] < 5.0, name  # the camera reaches its aim
+        assert c["pointing_err_deg"][on_aim[0]:].max() < 1.0, name
         cov[name] = c["coverage"][-1]
     assert max(cov.values()) - min(cov.values()) <= 0.02, cov
     assert min(cov.values()) > 0.05, cov
