@@ -36,10 +36,10 @@ with ``scale`` the largest magnitude of that kind of quantity in the comparison 
 floating-point error bounds are): the largest position (m) among the compared frames, 1 for
 rotation entries and unit axes, the total mass (kg), the largest inertia entry (kg·m²), the
 largest twist entry times (1 + the largest position) (a twist is moved between points by
-lever arms of that size), the largest entry of M. A few chained rotations of a few flops each
-cost tens of ulp (the measured maxima, docs/architecture.md §2, are below 16 ulp), so 256
-leaves a margin of more than ten while any modelling difference (a misplaced frame, a
-mis-read inertia, 1e-6 and more) is ten orders of magnitude above it.
+lever arms of that size), the largest entry of M. Chains of a dozen rotations and products
+cost tens of ulp at most; on the shipped robots the largest difference is 19 ulp of its scale
+(docs/architecture.md §2), so 256 leaves a margin above ten, while a modelling difference (a
+misplaced frame or a mis-read inertia, 1e-9 relative and more) is orders of magnitude above.
 
 The verdict is cached by the SHA-256 of the file's content, the camera frame's name, the pin
 and mujoco versions and this module's own source (a changed check checks again), in one small
@@ -300,16 +300,17 @@ INERTIA_CAUSE = ("the parsers read the inertial data differently (an inertial fr
 
 
 def _placements(p: _Pair, c: _Diffs, where: str) -> None:
-    """World placements: camera first, then bodies, sites, joints (anchor and world axis)."""
+    """World placements: the bodies from the root down (the first to disagree points at the
+    cause), then the sites (the camera frame first), then the joints (anchor, world axis).
+    A site is blamed only once its body agrees."""
     model, data, d = p.model, p.data, p.d
     pin.updateFramePlacements(model, data)
     pin.computeJointJacobians(model, data)
-    items = [(f"body {n!r}", fid, d.xpos[b], d.xmat[b], TREE_CAUSE)
-             for n, (fid, b) in p.bodies.items()]
-    items += [(f"site {n!r}", fid, d.site_xpos[s], d.site_xmat[s], _site_cause(p, s))
-              for n, (fid, s) in p.sites.items()]
     camera = f"{p.camera[0]} {p.camera[1]!r}"
-    items.sort(key=lambda it: it[0] != camera)  # stable: the camera frame first
+    items = [(f"body {n!r}", fid, d.xpos[b], d.xmat[b], TREE_CAUSE)
+             for n, (fid, b) in sorted(p.bodies.items(), key=lambda it: it[1][1])]
+    items += sorted([(f"site {n!r}", fid, d.site_xpos[s], d.site_xmat[s], _site_cause(p, s))
+                     for n, (fid, s) in p.sites.items()], key=lambda it: it[0] != camera)
     scale = max([1.0] + [np.max(np.abs(it[2])) for it in items])
     for what, fid, x_mj, R_mj, cause in items:
         oMf = data.oMf[fid]
