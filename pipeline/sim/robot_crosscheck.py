@@ -1,5 +1,5 @@
 """The robot the code sees is the robot in the file: Pinocchio's model of a robot file against
-MuJoCo's own compile of the same file (eqs. 1, 2, 8, 21).
+MuJoCo's own compile of the same file (eq. 1).
 
 MuJoCo defines what an MJCF means and compiles URDF through its own importer, so it is an
 independent second reading of every robot file. :func:`crosscheck_robot_file` compares the
@@ -348,7 +348,7 @@ def _mujoco_rigid_body(p: _Pair, body: int) -> tuple[float, np.ndarray, np.ndarr
 
 
 def _inertias(p: _Pair, c: _Diffs, q: np.ndarray, where: str) -> None:
-    """Each moving rigid body (eq. 1), the total mass and the whole-body CoM (eq. 2)."""
+    """Each moving rigid body, the total mass m and the whole-body CoM p_c (eq. 1)."""
     model, data, mj, d = p.model, p.data, p.mj, p.d
     total = float(sum(model.inertias[i].mass for i in range(model.njoints)))
     total_mj = float(mj.body_mass[1:].sum())
