@@ -325,11 +325,13 @@ def _placements(p: _Pair, c: _Diffs, where: str) -> None:
     for n, (i, j) in p.joints.items():
         if i == 1:
             continue
-        iv = model.joints[i].idx_v
-        c.check("position", f"the anchor of joint {n!r}", data.oMi[i].translation,
-                d.xanchor[j], scale, where, " m", TREE_CAUSE)
-        c.check("axis", f"the world axis of joint {n!r}", data.J[3:, iv], d.xaxis[j], 1.0,
-                where, "", TREE_CAUSE)
+        axis, r = d.xaxis[j], data.oMi[i].translation - d.xanchor[j]
+        c.check("axis", f"the world axis of joint {n!r}", data.J[3:, model.joints[i].idx_v],
+                axis, 1.0, where, "", TREE_CAUSE)
+        # Any point of the axis line is the same joint: the anchors' offset across the axis.
+        c.check("position", f"the axis line of joint {n!r} (anchors)", r - axis * (axis @ r),
+                0.0, scale, where, " m", TREE_CAUSE,
+                shown=(data.oMi[i].translation, d.xanchor[j]))
 
 
 def _mujoco_rigid_body(p: _Pair, body: int) -> tuple[float, np.ndarray, np.ndarray]:
