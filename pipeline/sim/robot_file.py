@@ -4,7 +4,10 @@ A robot of this project is a free-floating bus (the root body, on a free joint) 
 6-DoF arm with a camera frame. A URDF describes the bus and the arm; the free joint is added
 here. An MJCF declares it itself (``<freejoint/>`` on the root body), as MuJoCo models do.
 Either way the loaded model must have nq = 13, nv = 12, a free flyer as joint 1 and the
-camera frame; anything else is a :class:`~pipeline.errors.SpecError` naming the file.
+camera frame; anything else is a :class:`~pipeline.errors.SpecError` naming the file. The
+file is then read a second time, by MuJoCo, and the two models compared
+(:mod:`pipeline.sim.robot_crosscheck`, once per file content): the robot the code sees is the
+robot in the file.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
+from pipeline.sim.robot_crosscheck import crosscheck_robot_file
 
 MJCF_SUFFIXES = (".xml", ".mjcf")
 N_JOINTS = 6
@@ -35,8 +39,10 @@ def load_robot_model(path: Path | str, camera_frame: str,
                      bus_inertia_scale: float = 1.0) -> pin.Model:
     """The Pinocchio model of a robot file, gravity off, validated (eq. 1).
 
+    The parse is cross-checked against MuJoCo's (:func:`crosscheck_robot_file`) before
     ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body on the free
-    joint about its own centre of mass; its mass and centre of mass stay.
+    joint about its own centre of mass (its mass and centre of mass stay): the check is about
+    the file.
     """
     path = Path(path)
     model = _parse(path)
@@ -50,6 +56,7 @@ def load_robot_model(path: Path | str, camera_frame: str,
                         f"({len(kinds) - 1} arm joints)")
     if not model.existFrame(camera_frame):
         raise SpecError(f"{path}: no frame {camera_frame!r} (robot.camera_frame)")
+    crosscheck_robot_file(path, model, camera_frame)
     model.gravity.setZero()
     if bus_inertia_scale != 1.0:
         bus = model.inertias[1]
