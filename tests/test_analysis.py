@@ -223,3 +223,22 @@ def test_bad_logs_exit_2_with_one_line(short_logs, tmp_path, case, needle):
     assert needle in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_bus_rate_at_bound_share_counts_the_steps_at_dt_a_max_whatever_the_flag():
+    """A synthetic ω_b built step by step: 60 steps of exactly dt·a_max, 20 short of it by
+    3e-7 (a request just under the bound: at the bound, flag clear), 20 short by 2 %: the
+    share at the bound is 80/100 by construction, and the median step is dt·a_max."""
+    from pipeline.analysis.stages import bus_rate_statistics
+
+    dt, a_max = 0.03, 10.0
+    bound = dt * a_max
+    sizes = np.array([1.0] * 60 + [1.0 - 3e-7] * 20 + [0.98] * 20)
+    np.random.default_rng(3).shuffle(sizes)
+    axis = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    x = np.concatenate([[0.0], np.cumsum(bound * sizes * (-1.0) ** np.arange(100))])
+    w_b = x[:, None] * axis[None, :]
+    got = bus_rate_statistics(w_b, dt, a_max)
+    assert got["at_bound_share"] == pytest.approx(0.8, abs=1e-12)
+    assert got["step_ratio"] == pytest.approx(1.0, abs=1e-12)
+    assert got["lag1"] < -0.9
