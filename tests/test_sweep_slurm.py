@@ -13,10 +13,11 @@ SLURM's walltime is whole minutes (1 minute is the shortest: a limit in seconds 
 to one), checked by slurmctld every 30 s, and its kill waits ``KillWait`` (5 s here) between
 SIGTERM and SIGKILL: a job of a 1-minute limit is killed 60 to 90 s after it starts (measured
 here: 65 and 72 s for two jobs of one check). The hard-kill test therefore gives its two
-one-core jobs about two minutes of work, so that every first job is killed mid-sweep. The
+one-core jobs about two and a half minutes of work, measured in seconds on the machine that
+runs it (``_point_duration``), so that every first job is killed mid-sweep. The
 retirement test does not need SLURM's clock: its workers retire after ``--lifetime 15`` (the
 default for a 1-minute walltime, 40 ± 3 s, is ``default_lifetime``'s, tested in
-tests/test_sweep.py), long before the limit, on half a minute of work each.
+tests/test_sweep.py), long before the limit, on about 36 s of work each.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ import pytest
 from sweep_helpers import sweep, table
 
 from pipeline.paths import PROJECT_ROOT
+from pipeline.sim.run import run_spec
+from pipeline.spec import load_spec, with_overrides
 
 pytestmark = pytest.mark.slurm
 SCRIPT = PROJECT_ROOT / "scripts" / "slurm-local.sh"
@@ -116,17 +119,38 @@ def test_slurm_sweep_end_to_end_with_cache(slurm_up, tmp_path, record_property):
     record_property("wall_s", round(time.monotonic() - t0, 1))
 
 
+POINT_SECONDS = 3.0  # the work of one point of the walltime sweeps, on this machine
+
+
+def _point_duration(tmp: Path) -> float:
+    """The mission duration (s) whose run costs about POINT_SECONDS here, measured: the
+    walltime tests need a given amount of work in seconds, whatever the processor's speed (a
+    fixed duration of 250 s was 2.5 s of work on the machine it was written on and 1.7 s on a
+    faster one, where the hard-kill sweep then ended before SLURM's limit). One 300-step run
+    of the sweep's spec at its mean step, kernels warm, gives the cost of a step."""
+    spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 7.65,
+                                                       "mission.dt": 0.0255})
+    run_spec(spec, tmp / "calibration")  # loads the kernels
+    t0 = time.perf_counter()
+    run_spec(spec, tmp / "calibration")
+    per_step = (time.perf_counter() - t0) / 300
+    return round(POINT_SECONDS / per_step * 0.0255, 1)
+
+
 def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
                     ) -> tuple[list[str], dict]:
     """12 × ``gains`` points on two jobs of a 1-minute walltime: every point must complete
     although the first jobs end mid-sweep (``lifetime``: the sweep's ``--lifetime`` option).
-    A point is a 250-s mission at dt ≈ 0.025 s, about 2.5 s of work on an idle core (10 000
-    steps at ~0.25 ms): well below a worker's lifetime even on a loaded host, so that a
-    retiring worker hands back little work."""
+    A point is a mission at dt ≈ 0.025 s of about POINT_SECONDS of work on an idle core
+    (its duration measured by :func:`_point_duration`): well below a worker's lifetime even
+    on a loaded host, so that a retiring worker hands back little work."""
     dts = ",".join(f"{0.02 + 0.001 * i:.3f}" for i in range(12))
     ds = ",".join(f"{1.0 + 0.25 * i:g}" for i in range(gains))
+    duration = _point_duration(tmp)
+    record_property("point_duration_s", duration)
     t0 = time.monotonic()
-    r = sweep(tmp, "short_nominal", "--set", "mission.duration=250", "--set", f"mission.dt={dts}",
+    r = sweep(tmp, "short_nominal", "--set", f"mission.duration={duration}",
+              "--set", f"mission.dt={dts}",
               "--set", f"controller.gains.cam_ori.D={ds}", "--slurm", "--workers", "2",
               *lifetime, timeout=900, **LOCAL, DASK_JOBQUEUE__SLURM__WALLTIME="00:01:00")
     wall = time.monotonic() - t0
@@ -147,7 +171,7 @@ def _walltime_sweep(tmp: Path, gains: int, lifetime: list[str], record_property
 def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, record_property):
     """Worker lifetime 15 ± 2 s, a quarter of the 1-minute walltime: each worker retires
     gracefully before SLURM's limit and adapt submits a replacement job."""
-    # 24 points, ~60 s of work, ~30 s on two workers: past the first retirements at ~15 s
+    # 24 points, ~72 s of work, ~36 s on two workers: past the first retirements at ~15 s
     jobs, logs = _walltime_sweep(tmp_path, 2, ["--lifetime", "15"], record_property)
     assert set(logs) <= set(jobs)
     assert any("worker-lifetime-reached" in text for text in logs.values()), logs
@@ -157,7 +181,7 @@ def test_slurm_walltime_workers_retire_before_the_limit(slurm_up, tmp_path, reco
 def test_slurm_walltime_hard_kill_is_survived(slurm_up, tmp_path, record_property):
     """No lifetime: SLURM kills the jobs at the walltime (SIGTERM, SIGKILL KillWait s later),
     mid-task; the points they ran are rescheduled and the killed jobs replaced."""
-    # 96 points, ~240 s of work, ~120 s on two workers: past SLURM's kill 60–95 s after start
+    # 96 points, ~290 s of work, ~145 s on two workers: past SLURM's kill 60–95 s after start
     jobs, logs = _walltime_sweep(tmp_path, 8, ["--lifetime", "0"], record_property)
     assert set(logs) <= set(jobs)
     assert any("DUE TO TIME LIMIT" in text for text in logs.values()), logs
