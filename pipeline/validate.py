@@ -13,18 +13,25 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
+from pipeline.sim.stability import DampingMode, ModeFixes
 from pipeline.spec import Spec, load_spec
+
+# The units of each gain block's damping gain (eq. 13).
+GAIN_UNITS = {"bus": "N·m·s/rad", "cam_pos": "N·s/m", "cam_ori": "N·m·s/rad"}
 
 
 @dataclass(frozen=True)
 class Validation:
-    """What ``validate`` found: the resolved spec, its cost and the bus-yaw mode's step."""
+    """What ``validate`` found: the resolved spec, its cost, every damping mode at the start
+    and the fixes of the fastest, and the bus-yaw mode's closed form."""
 
     spec: Spec
     estimate: Estimate
     budget: Budget
     log_bytes: int  # the log's rows before Parquet's compression (an upper bound on disk)
     mu_bus: float  # 1/s, D_b / I_zz,bus of the spec's robot (eq. 21)
+    modes: list[DampingMode]  # of M̆⁻¹D̆ at the start state, fastest first (eq. 21)
+    fixes: ModeFixes  # of the fastest (eq. 24)
 
     @property
     def dt_mu_bus(self) -> float:
@@ -46,7 +53,13 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
     card = robot_card(model, q, spec.controller.gains.bus.D)
     budget = budget or Budget.from_environment()
     est = check_mission(spec, budget, str(spec_arg))
-    return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, card.mu_bus)
+    from pipeline.sim.mission import Mission
+    from pipeline.sim.stability import damping_modes, mode_fixes
+
+    mission = Mission(spec)
+    M, D, _, _ = mission.linearised_loop(mission.initial_state())
+    return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, card.mu_bus,
+                      damping_modes(M, D), mode_fixes(M, D, spec.mission.dt))
 
 
 def _size(x: float) -> str:
@@ -70,6 +83,48 @@ def report_lines(v: Validation) -> list[str]:
     integ = s.controller.integrator
     stable = ("explicit: stable in this mode only below 2" if integ == "explicit"
               else "imex: the damping is implicit, no step bound")
+    return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
+            f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
+            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable})"]
+
+
+def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
+    """Every damping mode at the start, the fastest named with the gain that sets it, and its
+    fixes: the largest step and gain, stable and with the margin dt·μ ≤ 1 (eqs. 21, 24)."""
+    from pipeline.analysis.theory import regime
+
+    f = v.fixes
+    fast = f.mode
+    listed = ", ".join(f"{m.mu:.4g} ({m.name})" for m in v.modes)
+    gain = f"controller.gains.{f.gain_block}.D"
+    unit = GAIN_UNITS[f.gain_block]
+    lines = [
+        f"  damping modes at the start, μ of M̆⁻¹D̆ in 1/s (eq. 21), fastest first: {listed}",
+        f"  fastest: {fast.name}, μ = {fast.mu:.4g} 1/s, dt·μ = {f.dt_mu:.3g}, its rate set by "
+        f"{gain} = {f.gain:.4g} {unit} (share {fast.shares[fast.block]:.3f}); "
+        + (f"explicit: {regime(f.dt_mu)} (stable below 2)" if integ == "explicit"
+           else "imex: the damping is implicit, no step bound from it"),
+    ]
+    if integ != "explicit":
+        return lines
+
+    def gain_text(g: float | None) -> str:
+        if g is not None:
+            return f"{gain} at most {g:.4g} {unit}"
+        return (f"no value of {gain} (with it at 0 the fastest mode still has dt·μ = "
+                f"{dt * f.mu_without:.3g})")
+
+    lines += [
+        f"  fixes (stable, dt·μ < 2): mission.dt below 2/μ = {f.dt_stable:.4g} s, or "
+        f"{gain_text(f.gain_stable)} at dt = {dt:g} s, or controller.integrator: imex",
+        f"  with a margin (dt·μ ≤ 1: half the bound, and the bound itself under one step of "
+        f"computation delay, z² − z + dt·μ = 0): mission.dt at most {f.dt_margin:.4g} s, or "
+        f"{gain_text(f.gain_margin)} at dt = {dt:g} s",
+    ]
+    return lines
+
+
+def _cost_lines(v: Validation, s: Spec, est: Estimate, m, integ: str) -> list[str]:
     return [
         f"{s.name}: valid spec (hash {s.spec_hash[:12]}), robot {s.robot.file}, "
         f"integrator {integ}",
@@ -81,8 +136,6 @@ def report_lines(v: Validation) -> list[str]:
         f"  time:   at most about {_duration(est.seconds)} of simulation "
         f"(budget {_duration(v.budget.seconds)}, BREVE_TIME_BUDGET_H), not counting the "
         f"one-time compile of the kernels",
-        f"  bus-yaw damping mode: μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
-        f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable})",
     ]
 
 

@@ -124,17 +124,23 @@ class Mission:
         """(dt*_damping, dt*_map) at state ``s`` for the spec's integrator (eq. 24): 2/μ_max,
         and the step at which the spectral radius of the map Φ (stiffness included) reaches 1
         (None if none below 1 s). The online guard evaluates them once, at the start."""
+        M, D, K_x, J_x = self.linearised_loop(s)
+        # C-ordered, as the step kernel passes it: one compiled specialisation (the kernel
+        # makes the same contiguous copy itself).
+        mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
+        integrator = self.spec.controller.integrator
+        return critical_step(mu_max), bisect_critical_step(M, D, K_x, J_x, integrator)
+
+    def linearised_loop(self, s: LoopState) -> tuple[np.ndarray, ...]:
+        """(M̆, D̆, K_x, J_x) at state ``s``: the reduced inertia, the damping gains after the γ
+        derate, the stiffness in x̃ coordinates and the task Jacobian (eqs. 13, 21, 22)."""
         robot, ctrl = self.robot, self.spec.controller
         T = robot.terms(s.q, s.v)
         gamma = conditioning_scale(T.s_min_G, ctrl)
         J_x = task_errors(T, self.guidance.reference(s.tau, T.p_b), gamma, s.v_c).J_x
         K, D = block_gains(ctrl, gamma)
         K_x = J_x.T @ K + posture_stiffness(T.gamma_inv, ctrl.gains.posture, J_x)
-        M = T.reduced_inertia
-        # C-ordered, as the step kernel passes it: one compiled specialisation (the kernel
-        # makes the same contiguous copy itself).
-        mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
-        return critical_step(mu_max), bisect_critical_step(M, D, K_x, J_x, ctrl.integrator)
+        return np.asarray(T.reduced_inertia), D, K_x, J_x
 
     def controller_vector(self) -> np.ndarray:
         """The spec's controller and the robot's constants as the step kernel reads them

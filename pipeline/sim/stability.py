@@ -95,3 +95,124 @@ def posture_stiffness(gamma_inv: np.ndarray, k_posture: float, J_x: np.ndarray) 
     """Posture spring in x̃ coordinates: (Γ⁻¹[6:, 3:])ᵀ k Γ⁻¹[6:, 3:] J_x⁻¹ (eq. 13e, 22)."""
     P = gamma_inv[6:, 3:]
     return k_posture * P.T @ P @ np.linalg.inv(J_x)
+
+
+# -- The damping modes and their fixes (eqs. 21, 24) -----------------------------------------
+
+# The nine reduced coordinates v̆ = [ω_b ; ν_e,lin ; ν_e,ang] (eq. 2): ω_b in the bus frame (z
+# along the shoulder-pan axis on both shipped robots), ν_e in the camera frame (z the boresight).
+REDUCED_AXES = ("bus ω_b,x", "bus ω_b,y", "bus yaw ω_b,z",
+                "camera ν_e,x", "camera ν_e,y", "camera ν_e,z (along the boresight)",
+                "camera ω_e,x", "camera ω_e,y", "camera roll ω_e,z (about the boresight)")
+# The 3-blocks of D̆ and the spec's gains that set them (eq. 13).
+GAIN_BLOCKS = ("bus", "cam_pos", "cam_ori")
+# Forward Euler on ė = −μ e is stable iff dt·μ < 2 (eq. 24). With one step of computation delay
+# (the command of step k from the state of step k − 1) it reads e⁺ = e − dt·μ·e⁻, whose
+# characteristic equation z² − z + dt·μ = 0 has its roots on the unit circle at dt·μ = 1: the
+# bound halves. dt·μ ≤ 1 is therefore both a margin of two on the undelayed loop and the
+# stability bound of the delayed one.
+DT_MU_STABLE = 2.0
+DT_MU_MARGIN = 1.0
+
+
+@dataclass(frozen=True)
+class DampingMode:
+    """One eigenpair of M̆⁻¹D̆ (eq. 21): M̆⁻¹D̆ e = μ e, eᵀ M̆ e = 1.
+
+    With D̆ = Σ_j d_j P_j (P_j the projector on block j), μ = eᵀ D̆ e = Σ_j d_j ‖P_j e‖²: the
+    share of block j in μ is d_j ‖P_j e‖² / μ, which is also ∂ln μ/∂ln d_j, how strongly its
+    gain sets the rate."""
+
+    mu: float  # 1/s
+    vector: np.ndarray  # e (9), M̆-normalised
+    shares: np.ndarray  # (3,) the share of each gain block in μ, summing to 1
+    axis: int  # the reduced coordinate of largest |e_i| within the dominant block
+
+    @property
+    def block(self) -> int:
+        return int(np.argmax(self.shares))
+
+    @property
+    def name(self) -> str:
+        return REDUCED_AXES[self.axis]
+
+
+def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]:
+    """Every damping mode of M̆⁻¹D̆, fastest first (eq. 21), from SciPy's symmetric-definite
+    generalized eigensolver (D̆ e = μ M̆ e; not a per-step computation)."""
+    import scipy.linalg
+
+    mu, E = scipy.linalg.eigh(D_breve, M_breve)
+    d = np.diag(D_breve)
+    modes = []
+    for i in np.argsort(mu)[::-1]:
+        e = E[:, i]
+        # An undamped mode (μ = 0, a block's gain at 0) has no share: it goes by ‖P_j e‖².
+        per_axis = d * e**2 if mu[i] > 0 else e**2
+        shares = per_axis.reshape(3, 3).sum(axis=1) / per_axis.sum()
+        b = int(np.argmax(shares))
+        axis = 3 * b + int(np.argmax(np.abs(e[3 * b:3 * b + 3])))
+        modes.append(DampingMode(float(mu[i]), e, shares, axis))
+    return modes
+
+
+def mu_max_with_gain(M_breve: np.ndarray, D_breve: np.ndarray, block: int, d: float) -> float:
+    """μ_max of M̆⁻¹D̆ with the damping gain of block ``block`` set to d (eq. 21)."""
+    D = D_breve.copy()
+    D[3 * block:3 * block + 3, 3 * block:3 * block + 3] = d * np.eye(3)
+    return damping_modes(M_breve, D)[0].mu
+
+
+def largest_stable_gain(M_breve: np.ndarray, D_breve: np.ndarray, block: int,
+                        mu_bound: float, rtol: float = 1e-9) -> float | None:
+    """The largest damping gain d of block ``block`` (the other blocks as they are) with every
+    μ of M̆⁻¹D̆ at most ``mu_bound``; None when even d = 0 leaves a faster mode.
+
+    μ_max grows monotonically with d (D̆ grows by a positive semi-definite term), so it is
+    bisected; the bracket's upper end is the d at which the block alone would reach the bound
+    in its slowest direction."""
+    def mu_max(d: float) -> float:
+        return mu_max_with_gain(M_breve, D_breve, block, d)
+
+    if mu_max(0.0) > mu_bound:
+        return None
+    lo, hi = 0.0, 1.0
+    while mu_max(hi) <= mu_bound:
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if mu_max(mid) <= mu_bound else (lo, mid)
+    return lo
+
+
+@dataclass(frozen=True)
+class ModeFixes:
+    """The fixes of the fastest mode at step dt (eq. 24): the largest step, and the largest
+    gain of its dominant block, for stability (dt·μ < 2) and with the margin dt·μ ≤ 1 (the
+    bound under one step of delay)."""
+
+    mode: DampingMode
+    dt: float
+    gain_block: str  # one of GAIN_BLOCKS
+    gain: float  # its damping gain now (the diagonal of D̆, after any derate)
+    dt_stable: float  # 2/μ
+    dt_margin: float  # 1/μ
+    gain_stable: float | None  # the largest gain with every dt·μ < 2
+    gain_margin: float | None  # ... with every dt·μ ≤ 1
+    mu_without: float  # μ_max with that gain at 0: the floor it cannot fix, 1/s
+
+    @property
+    def dt_mu(self) -> float:
+        return self.dt * self.mode.mu
+
+
+def mode_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float) -> ModeFixes:
+    """The fastest damping mode of M̆⁻¹D̆ and its fixes at step dt (eqs. 21, 24)."""
+    fastest = damping_modes(M_breve, D_breve)[0]
+    b = fastest.block
+    return ModeFixes(
+        fastest, dt, GAIN_BLOCKS[b], float(D_breve[3 * b, 3 * b]),
+        DT_MU_STABLE / fastest.mu, DT_MU_MARGIN / fastest.mu,
+        largest_stable_gain(M_breve, D_breve, b, DT_MU_STABLE / dt),
+        largest_stable_gain(M_breve, D_breve, b, DT_MU_MARGIN / dt),
+        mu_max_with_gain(M_breve, D_breve, b, 0.0))
