@@ -97,6 +97,7 @@ def _claims(claims: str, out: Path, force: bool = False):
         RECORD_NAME,
         exit_code,
         failure_lines,
+        kind_counts,
         read_claims_json,
         status_counts,
         summary_lines,
@@ -130,6 +131,7 @@ def _claims(claims: str, out: Path, force: bool = False):
             atomic_write_text(stamp, claims_key(sources, [*outcome.files, *made]))
             data = read_claims_json(outcome.record)
             st.done(status_counts(data))
+    print(f"claims by kind: {kind_counts(data)}")
     for line in summary_lines(data):
         print(line)
     for line in failure_lines(data):

@@ -400,3 +400,25 @@ def test_bad_claims_files_are_one_line_spec_errors(tmp_path, text, needle):
         load_claims(path)
     r = run_cli("claims", "--claims", str(path), "--out", str(tmp_path / "out"))
     assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_every_shipped_claim_has_a_kind_and_the_summary_counts_them_apart():
+    """The register tags each claim physics, note, identity or software (claims.yaml's header);
+    the summary counts each kind with its statuses, physics first, unclassified last."""
+    from pipeline.claims.record import kind_counts
+    from pipeline.claims.register import CLAIM_KINDS
+
+    cf = load_claims(SHIPPED_SPECS / "claims.yaml")
+    assert {c.kind for c in cf.claims} == set(CLAIM_KINDS)
+    data = {"claims": [{"kind": "note", "status": "OPEN"}, {"kind": "physics", "status": "PASS"},
+                       {"kind": "note", "status": "PASS"}, {"kind": None, "status": "FAIL"},
+                       {"kind": "physics", "status": "FAIL"}]}
+    assert kind_counts(data) == ("physics findings 2 (1 PASS, 1 FAIL); note rows 2 (1 PASS, "
+                                 "1 OPEN); unclassified 1 (1 FAIL)")
+
+
+def test_an_unknown_kind_is_a_one_line_error(tmp_path):
+    path = claims_file(tmp_path, [claim("C1", "nominal:dominant.lag1", "lt", 0, kind="opinion")])
+    with pytest.raises(SpecError) as e:
+        load_claims(path)
+    assert "kind" in str(e.value) and "\n" not in str(e.value)

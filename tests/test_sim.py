@@ -25,6 +25,7 @@ from pipeline.sim.base_guidance import BaseGuidance
 from pipeline.sim.limits import LIMIT_FLAGS, saturate
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.robot_file import robot_card
 from pipeline.sim.run import run_spec
 from pipeline.sim.target import build_target, visible
 from pipeline.spec import Camera, Limits, Target, load_spec, with_overrides
@@ -163,6 +164,12 @@ def test_guard_warns_once_under_explicit_beyond_two(guard_runs):
     dt_map = float(w.split("dt*_map = ")[1].split(" s")[0])
     assert dt_map < 2 / mu < spec.mission.dt
     assert res.columns["dt_mu_max"][0] == pytest.approx(spec.mission.dt * mu, rel=1e-9)
+    # The fastest mode named, and the bus gain that puts it at dt·μ = 2: 2·I_zz,bus/dt for the
+    # seed robot's bus yaw, whose rate is D_b/I_zz,bus (the robot card's closed form).
+    card = robot_card(Mission(spec).robot.model, res.columns["q"][0], spec.controller.gains.bus.D)
+    assert "μ_max the bus yaw ω_b,z mode's" in w
+    d_max = float(w.split("controller.gains.bus.D below ")[1].split(" ")[0])
+    assert d_max == pytest.approx(2 * card.I_zz_bus / spec.mission.dt, rel=1e-3)
 
 
 def test_guard_silent_under_imex(guard_runs):

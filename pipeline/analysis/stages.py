@@ -30,6 +30,7 @@ from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.stability import BUS_YAW_AXIS, mode_fixes
 from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
@@ -300,6 +301,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit")
+    fixes = mode_fixes(M_b, D, dt)
     record = {
         "rule": "the given step",
         "step": k, "t": k * dt, "s_min_G": T.s_min_G, "gamma": gamma,
@@ -321,6 +323,14 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
                      "eigenvalues": {"real": m.eigenvalues.real.tolist(),
                                      "imag": m.eigenvalues.imag.tolist()}}
                  for i, m in maps.items()},
+        # The fastest damping mode named, the gain block that sets it and its fixes (eqs. 21,
+        # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
+        "fastest_mode": {
+            "name": fixes.mode.name, "mu": fixes.mode.mu, "dt_mu": fixes.dt_mu,
+            "is_bus_yaw": fixes.mode.axis == BUS_YAW_AXIS,
+            "gain_block": fixes.gain_block, "share": float(fixes.mode.shares[fixes.mode.block]),
+            "gain": fixes.gain, "dt_stable": fixes.dt_stable, "dt_margin": fixes.dt_margin,
+            "gain_stable": fixes.gain_stable, "gain_margin": fixes.gain_margin},
         "integrator": integ, "dt": dt,
         "M_breve": M_b.tolist(), "D_breve": D.tolist(), "K_breve": K.tolist(),
         "J_x": J_x.tolist(), "K_x": K_x.tolist(),

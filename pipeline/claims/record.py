@@ -36,7 +36,8 @@ def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
     data = {"schema": CLAIMS_SCHEMA, "claims_file": display_path(cf.source),
             "source_version": version,
             "claims": [{"id": r.claim.id, "statement": r.claim.statement,
-                        "expect": r.claim.expect, "status": r.status, "reason": r.claim.reason,
+                        "kind": r.claim.kind, "expect": r.claim.expect, "status": r.status,
+                        "reason": r.claim.reason,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,
                                     "rel_tol": c.check.rel_tol,
                                     "value": _jsonable(c.value),
@@ -69,6 +70,22 @@ def status_counts(data: dict) -> str:
     """``28 PASS, 1 OPEN``: how many claims of each status there are (none: ``no claims``)."""
     counts = [(sum(c["status"] == s for c in data["claims"]), s) for s in STATUSES]
     return ", ".join(f"{n} {s}" for n, s in counts if n) or "no claims"
+
+
+# How the summaries name each kind of claim (pipeline/claims/register.py's CLAIM_KINDS).
+KIND_NAMES = {"physics": "physics findings", "note": "note rows", "identity": "input identities",
+              "software": "software checks", None: "unclassified"}
+
+
+def kind_counts(data: dict) -> str:
+    """``physics findings 14 (14 PASS); note rows 6 (4 PASS, 2 OPEN); …``: the claims of each
+    kind and their statuses, physics first (claims.yaml's header says what the kinds are)."""
+    parts = []
+    for kind, name in KIND_NAMES.items():
+        of_kind = [c for c in data["claims"] if c.get("kind") == kind]
+        if of_kind:
+            parts.append(f"{name} {len(of_kind)} ({status_counts({'claims': of_kind})})")
+    return "; ".join(parts)
 
 
 def exit_code(data: dict) -> int:

@@ -7,6 +7,7 @@
     claims:
       - id: C1
         statement: …
+        kind: physics                # or note, identity, software (claims.yaml's header)
         expect: hold                 # or open, with a reason
         checks:                      # all must hold
           - {metric: "nominal:dominant.lag1", op: lt, threshold: -0.5}
@@ -80,9 +81,15 @@ class ClaimCheck(_Strict):
         return t["metric"] if isinstance(t, dict) and set(t) == {"metric"} else None
 
 
+# What a claim is (claims.yaml's header): a physics finding, a row of the seed note, the
+# restatement of an input, or a check of the software and its inputs.
+CLAIM_KINDS = ("physics", "note", "identity", "software")
+
+
 class Claim(_Strict):
     id: str = Field(min_length=1)
     statement: str = Field(min_length=1)
+    kind: Literal["physics", "note", "identity", "software"] | None = None
     expect: Literal["hold", "open"]
     reason: str = ""
     checks: list[ClaimCheck] = Field(min_length=1)

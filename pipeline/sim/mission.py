@@ -43,7 +43,13 @@ from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.linalg import matvec
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
-from pipeline.sim.stability import bisect_critical_step, critical_step, posture_stiffness
+from pipeline.sim.stability import (
+    ModeFixes,
+    bisect_critical_step,
+    critical_step,
+    mode_fixes,
+    posture_stiffness,
+)
 from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
 
@@ -229,8 +235,9 @@ class Mission:
         # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
         dt_damping, dt_map = self.critical_steps(s0)
         if dt_map is not None and self.dt >= dt_map:
+            M, D, _, _ = self.linearised_loop(s0)
             warned.append(map_warning(self.dt, dt_map, dt_damping,
-                                      self.spec.controller.integrator))
+                                      self.spec.controller.integrator, mode_fixes(M, D, self.dt)))
         clipped = 0
         # Overflow shows as a non-finite state, caught below at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
@@ -284,15 +291,21 @@ def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) 
             f"{fix}= {dt_star:.4g} s")
 
 
-def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str) -> str:
-    """The online guard's message when mission.dt is past the map's critical step (eq. 24)."""
+def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str,
+                fixes: ModeFixes) -> str:
+    """The online guard's message when mission.dt is past the map's critical step (eq. 24),
+    naming the fastest damping mode and the gain that would fix it (eq. 21)."""
     fix = ("set controller.integrator: imex, or mission.dt below" if integrator == "explicit"
            else "set mission.dt below")
+    gain = ""
+    if integrator == "explicit" and fixes.gain_stable is not None:
+        gain = (f", or controller.gains.{fixes.gain_block}.D below {fixes.gain_stable:.4g} "
+                f"(now {fixes.gain:.4g}; the damping-only bound, dt·μ_max < 2)")
     return (f"step 0: mission.dt = {dt:.4g} s is at or above the critical step dt*_map = "
             f"{dt_map:.4g} s (the spectral radius of the discrete map Φ, stiffness included, "
-            f"reaches 1; the damping-only bound dt*_damping = 2/μ_max = {dt_damping:.4g} s) "
-            f"under the {integrator} integrator: the loop is unstable. Fix: {fix} "
-            f"{dt_map:.4g} s")
+            f"reaches 1; the damping-only bound dt*_damping = 2/μ_max = {dt_damping:.4g} s, "
+            f"μ_max the {fixes.mode.name} mode's) under the {integrator} integrator: the loop is "
+            f"unstable. Fix: {fix} {dt_map:.4g} s{gain}")
 
 
 def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:
