@@ -415,3 +415,76 @@ def inertia_map(table: Path, path: Path) -> str | None:
     fig.suptitle(label(f"bus-inertia sweep {table.parent.name}"))
     _save(fig, path)
     return None
+
+
+def stability_region(runs: list[RunData], tables: list[Path], path: Path,
+                     styles: dict[str, RunStyle] | None = None) -> None:
+    """Left: the (dt, μ) plane of one damping mode under forward Euler (eqs. 23, 24), with
+    the bound dt·μ = 2 and the margin dt·μ = 1 (the bound under one step of delay), each run's
+    fastest mode and every sweep point (μ_max at its dt), marked by its measured dominant
+    lag-1. Right: the locus of Φ's eigenvalues (eq. 22) as dt varies, for each run's
+    linearisation, against the unit circle."""
+    from pipeline.sim.stability import discrete_map
+
+    st = _styles(runs, styles)
+    fig, ax = plt.subplot_mosaic([["region", "locus"], ["key1", "key1"], ["key2", "key2"]],
+                                 figsize=(12, 8.0), height_ratios=[3, 1.3, 0.5],
+                                 layout="constrained")
+    a1, a2 = ax["region"], ax["locus"]
+    dts = np.geomspace(1e-3, 0.1, 200)
+    mus = np.array([1e-2, 1e4])
+    a1.fill_between(dts, 2 / dts, mus[1], color="tab:red", alpha=0.12,
+                    label="dt·μ > 2: period-2 unstable")
+    a1.fill_between(dts, 1 / dts, 2 / dts, color="tab:orange", alpha=0.12,
+                    label="1 < dt·μ < 2: stable, rings; unstable with one step of delay")
+    a1.fill_between(dts, mus[0], 1 / dts, color="tab:green", alpha=0.10,
+                    label="dt·μ ≤ 1: the margin")
+    a1.plot(dts, 2 / dts, "r-", lw=1.0, label="dt·μ = 2 (forward Euler)")
+    a1.plot(dts, 1 / dts, "k--", lw=0.9, label="dt·μ = 1 (one step of delay)")
+    for table in tables:
+        df = pd.read_parquet(table)
+        need = ["dt_mu_max", "mu_max", "dominant_lag1"]
+        if any(c not in df for c in need):
+            continue
+        df = df[df["status"] == "complete"].dropna(subset=need)
+        dt_pt = df["dt_mu_max"] / df["mu_max"]
+        ring = df["dominant_lag1"] < 0
+        a1.plot(dt_pt[ring], df["mu_max"][ring], "s", ms=4, mfc="none", color="tab:red")
+        a1.plot(dt_pt[~ring], df["mu_max"][~ring], "o", ms=4, mfc="none", color="tab:green")
+    a1.plot([], [], "s", ms=4, mfc="none", color="tab:red", label="sweep point, lag-1 < 0")
+    a1.plot([], [], "o", ms=4, mfc="none", color="tab:green", label="sweep point, lag-1 ≥ 0")
+    t = np.linspace(0, 2 * np.pi, 400)
+    a2.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
+    locus_dts = np.geomspace(0.002, 0.05, 60)
+    for r in runs:
+        th = r.record["theory"]
+        fm = th["fastest_mode"]
+        s = st[r.name]
+        mk = "*" if th["integrator"] == "explicit" else "P"
+        a1.plot(th["dt"], fm["mu"], mk, ms=11, color=s.color,
+                label=f"{r.name}: {fm['name']} ({th['integrator']})")
+        if th["integrator"] != "explicit":
+            continue
+        M, D, K_x, J_x = (np.asarray(th[k]) for k in ("M_breve", "D_breve", "K_x", "J_x"))
+        ev = np.array([np.linalg.eigvals(discrete_map(M, D, K_x, J_x, dt, "explicit"))
+                       for dt in locus_dts])
+        a2.scatter(ev.real.ravel(), ev.imag.ravel(), s=4, c=np.repeat(locus_dts, ev.shape[1]),
+                   cmap="viridis", norm=matplotlib.colors.LogNorm())
+        here = np.linalg.eigvals(discrete_map(M, D, K_x, J_x, th["dt"], "explicit"))
+        a2.plot(here.real, here.imag, "x", ms=8, color=s.color,
+                label=f"{r.name} at dt = {th['dt']:g} s")
+    a1.set(xscale="log", yscale="log", xlim=(dts[0], dts[-1]), ylim=(10.0, 1e3),
+           xlabel="dt (s)", ylabel="μ of the mode (1/s)",
+           title=label("Stability of one damping mode under forward Euler"))
+    sm = plt.cm.ScalarMappable(cmap="viridis", norm=matplotlib.colors.LogNorm(
+        locus_dts[0], locus_dts[-1]))
+    fig.colorbar(sm, ax=a2, label="dt (s)")
+    a2.set(xlim=(-4, 1.5), ylim=(-1.6, 1.6), xlabel=f"Re λ ({DIMLESS})",
+           ylabel=f"Im λ ({DIMLESS})", title=label("Eigenvalues of Φ (explicit) as dt varies"))
+    a2.set_aspect("equal", adjustable="box")
+    # The keys in panels of their own below the plots, which they would otherwise cover.
+    for key, src, ncol in ((ax["key1"], a1, 2), (ax["key2"], a2, 3)):
+        key.axis("off")
+        key.legend(*src.get_legend_handles_labels(), loc="upper left", ncol=ncol,
+                   fontsize=LEGEND_MIN_PT, frameon=False)
+    _save(fig, path)

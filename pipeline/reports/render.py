@@ -93,6 +93,18 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
                    "The online guard's dt·μ_max per step, with the forward-Euler bound 2."),
          partial(fg.dt_mu, logged, styles=styles), logged),
     ]
+    moded = [r for r in analysed if "fastest_mode" in r.record.get("theory", {})]
+    global_figs.append((fg.Figure(
+        "figures/stability_region.png", "Stability region and the eigenvalue locus",
+        "Left: the (dt, μ) plane of one damping mode under forward Euler: unstable above "
+        "dt·μ = 2, ringing between 1 and 2, and dt·μ ≤ 1 the margin (the bound itself under "
+        "one step of computation delay); each run's fastest mode (★ explicit, ✚ imex) and "
+        "every sweep point (μ_max at its dt, red squares where its measured lag-1 is "
+        "negative). Right: Φ's eigenvalues for each explicit run's linearisation as dt "
+        "varies (colour), its own dt marked ×: the dominant one leaves the unit circle at "
+        "−1."), partial(fg.stability_region, moded,
+                        sorted(Path(out).glob("sweeps/*/sweep.parquet")), styles=styles),
+        moded))
     jobs += [(fig, draw) for fig, draw, inputs in global_figs if inputs]
     for r in diverged:
         if r.log is None:
