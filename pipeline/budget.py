@@ -26,6 +26,10 @@ from pipeline.errors import SpecError
 
 STEP_SECONDS = 1.5e-4  # s per step without the target (bench: ~8e-5), with margin
 POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
+# The sampled-data plant (eq. 29) per RK4 substep, and its step's own Pinocchio terms (measured:
+# ~0.17 ms a substep of four ABA calls in Python, ~0.2 ms the terms), with margin.
+SUBSTEP_SECONDS = 3e-4
+HOLD_SECONDS = 5e-4
 ROW_FLOATS = 75  # the log row's width (control_step.ROW_SIZE; a test keeps them equal)
 ROW_BYTES = 3 * 8 * ROW_FLOATS
 POINT_BYTES = 7 * 8
@@ -70,11 +74,14 @@ class Estimate:
     seconds: float
 
 
-def mission_estimate(duration: float, dt: float, n_points: int) -> Estimate:
-    """Memory and time of one mission, from its duration, step and target size."""
+def mission_estimate(duration: float, dt: float, n_points: int, substeps: int = 0
+                     ) -> Estimate:
+    """Memory and time of one mission, from its duration, step, target size and the sampled
+    plant's RK4 substeps per step (0: the simulator's update, no plant)."""
     steps = round(duration / dt)
+    plant = HOLD_SECONDS + substeps * SUBSTEP_SECONDS if substeps else 0.0
     return Estimate(steps, steps * ROW_BYTES + n_points * POINT_BYTES,
-                    steps * (STEP_SECONDS + n_points * POINT_SECONDS))
+                    steps * (STEP_SECONDS + n_points * POINT_SECONDS + plant))
 
 
 def _gb(x: float) -> str:
@@ -89,7 +96,8 @@ def check_mission(spec, budget: Budget | None = None, where: str = "") -> Estima
     """SpecError naming the field when one mission of ``spec`` exceeds the budget."""
     budget = budget or Budget.from_environment()
     m, t = spec.mission, spec.target
-    est = mission_estimate(m.duration, m.dt, t.n_points)
+    est = mission_estimate(m.duration, m.dt, t.n_points,
+                           m.plant.substeps if m.plant.model == "sampled" else 0)
     src = where or spec.name
     if est.memory_bytes > budget.memory_bytes:
         field = ("target.n_points" if t.n_points * POINT_BYTES > est.steps * ROW_BYTES

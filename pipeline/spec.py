@@ -158,9 +158,21 @@ class Controller(_Block):
     limits: Limits = Limits()
 
 
+class Plant(_Block):
+    """What moves between two control instants (eq. 29): ``reduced``, the simulator's update
+    of the closed loop in reduced coordinates (eqs. 15, 22: the commanded velocity is the next
+    one), or ``sampled``, the robot's forward dynamics under the command held over the step
+    (zero-order hold), in ``substeps`` RK4 steps, applied ``delay_steps`` instants late."""
+
+    model: Literal["reduced", "sampled"] = "reduced"
+    substeps: int = Field(default=8, ge=1, le=10_000)
+    delay_steps: int = Field(default=0, ge=0, le=1)
+
+
 class Mission(_Block):
     dt: Positive = 0.03
     duration: Positive = 60.0
+    plant: Plant = Plant()
 
 
 class Guidance(_Block):

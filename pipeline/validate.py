@@ -62,6 +62,14 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
                       damping_modes(M, D), mode_fixes(M, D, spec.mission.dt))
 
 
+def _plant(p) -> str:
+    """How the spec's plant moves between control instants (eq. 29)."""
+    if p.model == "reduced":
+        return "reduced (the simulator's update)"
+    delay = f", {p.delay_steps} step of delay" if p.delay_steps else ""
+    return f"sampled (forward dynamics under the held command, {p.substeps} RK4 steps{delay})"
+
+
 def _size(x: float) -> str:
     for unit, scale in (("GiB", 2**30), ("MiB", 2**20)):
         if x >= scale:
@@ -127,7 +135,7 @@ def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
 def _cost_lines(v: Validation, s: Spec, est: Estimate, m, integ: str) -> list[str]:
     return [
         f"{s.name}: valid spec (hash {s.spec_hash[:12]}), robot {s.robot.file}, "
-        f"integrator {integ}",
+        f"integrator {integ}, plant {_plant(m.plant)}",
         f"  steps:  {est.steps:,} (duration {m.duration:g} s / dt {m.dt:g} s)",
         f"  log:    {est.steps:,} rows of {ROW_FLOATS} numbers, at most "
         f"{_size(v.log_bytes)} before compression -> logs/{s.name}/run.parquet",

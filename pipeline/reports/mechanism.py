@@ -42,7 +42,9 @@ def verdict(run: dict, other: dict) -> Verdict:
     explicit = run["integrator"] == "explicit"
     if explicit and lag < LAG1_PERIOD2 and th["dt_mu_max"] > 2:
         smooth = other["dominant"]["lag1"] > LAG1_SMOOTH
-        return Verdict("ripple", "Period-2 instability of forward Euler on the velocity damping"
+        # Not "of forward Euler" alone: a plant under the held command rings alike (C30).
+        return Verdict("ripple", "Period-2 instability of the velocity damping sampled at "
+                       f"dt = {run['dt']:g} s (dt·μ_max = {th['dt_mu_max']:.3g} > 2)"
                        + (", confirmed by the causal test." if smooth else
                           "; the causal test does not remove it."))
     if not explicit and lag > LAG1_SMOOTH:

@@ -41,6 +41,7 @@ from pipeline.sim.control_step import (
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.linalg import matvec
+from pipeline.sim.plant import held_command, integrate_held
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import (
@@ -54,6 +55,7 @@ from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
 
 _Q, _V, _TAU, _DQ = STATE["q"], STATE["v"], STATE["tau"].start, STATE["dq"]
+_VC, _VB = STATE["v_c"], STATE["v_breve"]
 _DT_MU = ROW["dt_mu_max"].start
 _SAT_V_MAX = ROW["sat_v_max"].start
 
@@ -106,6 +108,9 @@ class Mission:
         self.dt = spec.mission.dt
         self._reference = np.zeros(REFERENCE_SIZE)
         self._zero_q = np.zeros(self.robot.model.nq)
+        # The sampled-data plant's own Pinocchio data and its held command (eq. 29).
+        self._plant_data = self.robot.model.createData()
+        self._held: np.ndarray | None = None
         q_start = self.robot.start_configuration()
         T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
@@ -170,13 +175,44 @@ class Mission:
         and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt. Whether the new
         state is finite."""
         robot, ref = self.robot, self._reference
+        sampled = self.spec.mission.plant.model == "sampled"
+        if sampled:  # what the plant is at: (q_k, v_k) and ν_k = Γ(q_k) v_k, measured
+            q_k, v_k = state[_Q].copy(), state[_V].copy()
+            nu_k = np.concatenate([state[_VC], state[_VB]])
         inputs = robot.dynamics_inputs(state[_Q], state[_V])
         self.guidance.reference_into(ref, float(state[_TAU]), inputs.p_b)
         finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage)
+        if sampled:
+            return finite and self._hold(state, q_k, v_k, nu_k)
         q_new = pin.integrate(robot.model, state[_Q], state[_DQ])
         state[_Q] = q_new
         # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
         return finite and math.isfinite(q_new @ self._zero_q)
+
+    def _hold(self, state: np.ndarray, q_k: np.ndarray, v_k: np.ndarray,
+              nu_k: np.ndarray) -> bool:
+        """The sampled-data plant (eq. 29): the step's commanded reduced acceleration
+        ν̇ = (ν_{k+1} − ν_k)/dt as the generalized acceleration a = Γ⁻¹(ν̇ − Γ̇ v) and its
+        generalized force at (q_k, v_k), held (``delay_steps`` late) while the robot's forward
+        dynamics move it over dt; the controller then measures ν = Γ(q) v. Whether the state
+        is finite."""
+        model, data, plant = self.robot.model, self._plant_data, self.spec.mission.plant
+        nu_cmd = np.concatenate([state[_VC], state[_VB]])
+        if not np.all(np.isfinite(nu_cmd)):
+            return False
+        T = self.robot.terms(q_k, v_k)
+        a = matvec(T.gamma_inv, (nu_cmd - nu_k) / self.dt - matvec(T.gamma_dot, v_k))
+        tau = held_command(model, data, q_k, v_k, a)
+        if plant.delay_steps:
+            if self._held is None:  # before the first command: the one that holds v_0
+                self._held = held_command(model, data, q_k, v_k, np.zeros_like(v_k))
+            tau, self._held = self._held, tau
+        q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps)
+        if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
+            return False
+        nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
+        state[_Q], state[_V], state[_VC], state[_VB] = q, v, nu[:3], nu[3:]
+        return True
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
@@ -230,6 +266,7 @@ class Mission:
         ctrl = self.controller_vector()
         coverage = CoverageCounter.start(self.target, self.spec.camera)
         explicit = self.spec.controller.integrator == "explicit"
+        self._held = None  # a run starts with no command held (eq. 29)
         warned: list[str] = []
         # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
         # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).

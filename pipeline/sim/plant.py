@@ -1,0 +1,82 @@
+"""The sampled-data plant: the robot between two control instants under a held command (eq. 29).
+
+By default the simulator integrates the closed loop in reduced coordinates at the control step
+(eqs. 15, 22): the velocity the controller commands is the next velocity. A flight computer
+does something else: it samples the state every dt, computes a command, and holds it (zero-
+order hold) while the plant moves continuously. ``mission.plant.model: sampled`` runs that:
+
+    ν̇_k = (ν_{k+1}^cmd − ν_k) / dt          the reduced acceleration the step commands
+    a_k = Γ⁻¹(q_k) (ν̇_k − Γ̇(q_k, v_k) v_k)   the generalized acceleration it means (ν = Γ v)
+    τ_k = M(q_k) a_k + C(q_k, v_k) v_k       its generalized force at the sampled state (RNEA)
+    M(q) v̇ + C(q, v) v = τ_{k−d}  on [t_k, t_k + dt]     d = mission.plant.delay_steps ∈ {0, 1}
+
+integrated by classical Runge–Kutta (RK4) in ``substeps`` steps on the configuration's 13
+numbers (the bus position, its unit quaternion and the joint angles, whose rates are
+:func:`configuration_rate`), the forward dynamics by Pinocchio's ABA. The next step's
+controller measures the plant: ν = Γ(q) v.
+
+τ is the bus wrench and the six joint torques (the free flyer's 6 and the arm's 6 entries of
+the generalized force, in Pinocchio's convention). For one rigid body spinning about a
+principal axis under a held torque −D ω_k, the hold is exact: ω_{k+1} = (1 − dt·D/I) ω_k, the
+forward-Euler map of eq. 23, so a damping mode with dt·μ > 2 rings in the sampled-data loop
+too. The delayed hold (d = 1) applies the command of the previous instant; before the first,
+the command that holds the initial velocity (zero acceleration).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+
+def held_command(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
+                 a: np.ndarray) -> np.ndarray:
+    """τ = M(q) a + C(q, v) v: the generalized force of acceleration a at (q, v) (eq. 29),
+    gravity off as in the loaded model."""
+    return pin.rnea(model, data, q, v, a).copy()
+
+
+def configuration_rate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """q̇ of Pinocchio's free-flyer configuration (13 numbers on a robot of six joints) for the
+    velocity v (eq. 1):
+    ṗ_b = R_tb v_b = v_b + 2w (ε × v_b) + 2ε × (ε × v_b) (v_b in the bus frame, the unit
+    quaternion (ε, w), ε = (x, y, z)), its rate (ε̇, ẇ) = ½ [w ω + ε × ω ; −ε·ω] (ω in the bus
+    frame), q̇_a = v[6:].
+    """
+    w = q[6]
+    eps, vb, om = q[3:6], v[0:3], v[3:6]
+    t = np.cross(eps, vb)
+    dq = np.empty(len(q))
+    dq[0:3] = vb + 2.0 * w * t + 2.0 * np.cross(eps, t)
+    dq[3:6] = 0.5 * (w * om + np.cross(eps, om))
+    dq[6] = -0.5 * (eps @ om)
+    dq[7:] = v[6:]
+    return dq
+
+
+def _normalised(q: np.ndarray) -> np.ndarray:
+    q = q.copy()
+    q[3:7] /= np.linalg.norm(q[3:7])
+    return q
+
+
+def integrate_held(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
+                   tau: np.ndarray, dt: float, substeps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(q, v) after dt under the held generalized force τ (eq. 29): classical RK4 in
+    ``substeps`` steps on (q, v) ∈ R¹³ × R¹², q̇ from :func:`configuration_rate` and v̇ from
+    Pinocchio's ABA, each stage's quaternion normalised before it is used and the result's
+    after each step (the ODE keeps |quat| = 1; RK4 drifts from it by O(h⁵) per step)."""
+    h = dt / substeps
+
+    def rates(qs: np.ndarray, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        qs = _normalised(qs)
+        return configuration_rate(qs, vs), pin.aba(model, data, qs, vs, tau).copy()
+
+    for _ in range(substeps):
+        dq1, dv1 = rates(q, v)
+        dq2, dv2 = rates(q + 0.5 * h * dq1, v + 0.5 * h * dv1)
+        dq3, dv3 = rates(q + 0.5 * h * dq2, v + 0.5 * h * dv2)
+        dq4, dv4 = rates(q + h * dq3, v + h * dv3)
+        q = _normalised(q + h / 6.0 * (dq1 + 2.0 * dq2 + 2.0 * dq3 + dq4))
+        v = v + h / 6.0 * (dv1 + 2.0 * dv2 + 2.0 * dv3 + dv4)
+    return q, v
