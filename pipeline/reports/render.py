@@ -19,7 +19,7 @@ from functools import partial
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
-from pipeline.claims.record import kind_counts, read_claims_json
+from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text, read_meta
 from pipeline.provenance.keys import report_version
@@ -233,7 +233,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
-                   kind_counts=kind_counts(claims) if claims else "",
+                   kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,
                    pages=pages, sweeps=sweeps, code_version=report_version())
     for s in skipped:
         print(f"note: {s}", file=sys.stderr)
