@@ -327,7 +327,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
         "fastest_mode": {
             "name": fixes.mode.name, "mu": fixes.mode.mu, "dt_mu": fixes.dt_mu,
-            "is_bus_yaw": fixes.mode.axis == BUS_YAW_AXIS,
+            "axis": fixes.mode.axis, "is_bus_yaw": fixes.mode.axis == BUS_YAW_AXIS,
             "gain_block": fixes.gain_block, "share": float(fixes.mode.shares[fixes.mode.block]),
             "gain": fixes.gain, "dt_stable": fixes.dt_stable, "dt_margin": fixes.dt_margin,
             "gain_stable": fixes.gain_stable, "gain_margin": fixes.gain_margin},

@@ -488,3 +488,38 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
         key.legend(*src.get_legend_handles_labels(), loc="upper left", ncol=ncol,
                    fontsize=LEGEND_MIN_PT, frameon=False)
     _save(fig, path)
+
+
+def startup_growth(run: RunData, against: Path, path: Path,
+                   styles: dict[str, RunStyle] | None = None) -> None:
+    """The fastest damping mode's reduced coordinate (eq. 21) over the first half-second of a
+    run and of the run it is compared with (top), and the size of its alternating part,
+    a_k = |x_k − 2x_{k+1} + x_{k+2}|/4 (bottom, log scale), against the growth |λ|^k that Φ's
+    dominant eigenvalue predicts (eq. 22) until the saturation holds it."""
+    th = run.record["theory"]
+    axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
+    other = run.record["comparison"]["against"]
+    st = styles or palette([run.name, other])  # each run in its colour of the whole report
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), layout="constrained", sharex=True)
+    for label_, log, color in ((run.name, run.log, st[run.name].color),
+                               (other, against, st[other].color if other in st else "0.45")):
+        c = read_columns(log, ["t", "v_breve"])
+        keep = c["t"] <= 0.5
+        t, x = c["t"][keep], c["v_breve"][keep, axis]
+        a1.plot(t, x, "-o", ms=3, lw=0.9, color=color, label=label_)
+        alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+        a2.semilogy(t[:-2], np.maximum(alt, 1e-18), "o", ms=3, color=color, label=label_)
+    if th["integrator"] == "explicit" and run.log is not None:
+        c = read_columns(run.log, ["t", "v_breve"])
+        x = c["v_breve"][:, axis]
+        alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+        lam = abs(complex(th["eig_dominant"]["real"], th["eig_dominant"]["imag"]))
+        k0 = int(np.argmax(alt > 0))
+        k = np.arange(k0, min(len(alt), k0 + 12))
+        a2.semilogy(c["t"][k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
+                    label=f"|λ_dom|^k = {lam:.3g}^k (Φ's dominant eigenvalue)")
+    a1.set(ylabel=f"{name} (rad/s)", title=label(f"{name} over the first half-second"))
+    a2.set(xlabel="t (s)", ylabel="alternating part (rad/s)", ylim=(1e-8, 1.0))
+    a1.legend(loc="upper left")
+    a2.legend(loc="lower right")
+    _save(fig, path)

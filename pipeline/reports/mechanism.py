@@ -6,6 +6,7 @@ generalised eigenvector of the D̆ and M̆ stored there); the wording follows th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.linalg as sla
@@ -99,4 +100,6 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
         "note_rows": note_rows(rec, other), "fmt": fmt, "versions": versions,
+        # The start-up figure is drawn when both logs are there (render.figure_jobs).
+        "startup": run.log is not None and Path(comp.get("against_log", "")).is_file(),
     }

@@ -120,6 +120,17 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
             f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
             f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} of {r.name}, "
             f"explicit and imex, against the unit circle."), partial(fg.eigenvalues, r)))
+    for r in runs:
+        comp = r.record.get("comparison") or {}
+        against = Path(comp.get("against_log", "")) if comp else None
+        if not comp or r.log is None or against is None or not against.is_file():
+            continue
+        jobs.append((fg.Figure(
+            f"figures/startup_{r.folder}.png", f"Start-up of the fastest mode, {r.name}",
+            f"The fastest damping mode's coordinate over the first half-second of {r.name} and "
+            f"of {comp['against']}, and its alternating part on a log scale against the growth "
+            f"Φ's dominant eigenvalue predicts per step, until the saturation holds it."),
+            partial(fg.startup_growth, r, against, styles=styles)))
     for table in sorted(Path(out).glob("sweeps/*/sweep.parquet")):
         name = table.parent.name
         if fg.sweep_key(table) == "robot.bus_inertia_scale":
