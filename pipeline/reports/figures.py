@@ -523,3 +523,32 @@ def startup_growth(run: RunData, against: Path, path: Path,
     a1.legend(loc="upper left")
     a2.legend(loc="lower right")
     _save(fig, path)
+
+
+def mode_psd(run: RunData, against: Path, path: Path,
+             styles: dict[str, RunStyle] | None = None) -> None:
+    """The power spectral density (Welch, SciPy) of the fastest damping mode's reduced
+    coordinate over the analysis window (the second half) of a run and of the run it is
+    compared with, each with its Nyquist frequency 1/(2 dt): a period-2 ripple is a peak at
+    it."""
+    from scipy.signal import welch
+
+    th = run.record["theory"]
+    axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
+    other = run.record["comparison"]["against"]
+    st = styles or palette([run.name, other])
+    fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
+    for label_, log, color in ((run.name, run.log, st[run.name].color),
+                               (other, against, st[other].color if other in st else "0.45")):
+        c = read_columns(log, ["t", "v_breve"])
+        t, x = c["t"], c["v_breve"][:, axis]
+        x = x[len(x) // 2:]
+        dt = float(t[1] - t[0])
+        f, p = welch(x - x.mean(), fs=1.0 / dt, nperseg=min(256, len(x)))
+        ax.loglog(f[1:], np.maximum(p[1:], 1e-30), "-", lw=1.0, color=color, label=label_)
+        ax.axvline(0.5 / dt, color=color, ls="--", lw=0.9,
+                   label=f"Nyquist of {label_}: 1/(2·{dt:g} s) = {0.5 / dt:.3g} Hz")
+    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {name} ((rad/s)²/Hz)",
+           title=label(f"{name} over the window: power spectral density"))
+    ax.legend(loc="lower left")
+    _save(fig, path)

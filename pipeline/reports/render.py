@@ -131,6 +131,11 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
             f"of {comp['against']}, and its alternating part on a log scale against the growth "
             f"Φ's dominant eigenvalue predicts per step, until the saturation holds it."),
             partial(fg.startup_growth, r, against, styles=styles)))
+        jobs.append((fg.Figure(
+            f"figures/psd_{r.folder}.png", f"Spectrum of the fastest mode, {r.name}",
+            f"Power spectral density of the fastest damping mode's coordinate over the window "
+            f"of {r.name} and of {comp['against']}, with each run's Nyquist frequency: a "
+            f"period-2 ripple is a peak at it."), partial(fg.mode_psd, r, against, styles=styles)))
     for table in sorted(Path(out).glob("sweeps/*/sweep.parquet")):
         name = table.parent.name
         if fg.sweep_key(table) == "robot.bus_inertia_scale":
