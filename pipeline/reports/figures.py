@@ -548,7 +548,7 @@ def mode_psd(run: RunData, against: Path, path: Path,
         ax.loglog(f[1:], np.maximum(p[1:], 1e-30), "-", lw=1.0, color=color, label=label_)
         ax.axvline(0.5 / dt, color=color, ls="--", lw=0.9,
                    label=f"Nyquist of {label_}: 1/(2·{dt:g} s) = {0.5 / dt:.3g} Hz")
-    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {name} ((rad/s)²/Hz)",
+    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {name} (rad²/s²/Hz)",
            title=label(f"{name} over the window: power spectral density"))
     ax.legend(loc="lower left")
     _save(fig, path)
