@@ -351,7 +351,11 @@ def sweep_map(table: Path, path: Path) -> str | None:
     df = df.dropna(subset=need).sort_values("mission.dt")
     if df.empty:
         return f"{table}: no complete point"
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6), layout="constrained")
+    a_max = _omega_b_acc_bound(df)
+    amp = "bus_rate_alternating_rms" in df and a_max is not None
+    fig, axes = plt.subplots(1, 3 if amp else 2, figsize=(13.5 if amp else 9, 3.8),
+                             layout="constrained")
+    a1, a2 = axes[0], axes[1]
     unstable = df["dt_mu_max"] > 2
     for ax, col, ttl, ylab in ((a1, lag, "dominant lag-1", f"lag-1 r₁ ({DIMLESS})"),
                                (a2, "dt_mu_max", "dt·μ_max", f"dt·μ_max ({DIMLESS})")):
@@ -367,9 +371,36 @@ def sweep_map(table: Path, path: Path) -> str | None:
         ax.xaxis.set_major_locator(MaxNLocator(6))  # dt ticks of 4 digits collide otherwise
     a2.axhline(2.0, color="r", lw=0.8)
     a1.legend()
+    if amp:
+        # The ripple's size: a cycle held by the acceleration bound moves ω_b by dt·a_max per
+        # step, so its alternating part has amplitude dt·a_max/2 (eq. 16).
+        a3, dt = axes[2], df["mission.dt"]
+        y = df["bus_rate_alternating_rms"].clip(lower=1e-16)
+        a3.semilogy(dt[~unstable], y[~unstable], "o", color="tab:green", label="dt·μ_max < 2")
+        a3.semilogy(dt[unstable], y[unstable], "s", color="tab:red", label="dt·μ_max > 2")
+        grid = np.linspace(float(dt.min()), float(dt.max()), 100)
+        a3.semilogy(grid, grid * a_max / 2, "k--", lw=0.9,
+                    label=f"dt·a_max/2, a_max = {a_max:.4g} rad/s²")
+        a3.set(title="ω_b period-2 amplitude", xlabel="mission.dt (s)", ylabel="RMS (rad/s)")
+        a3.xaxis.set_major_locator(MaxNLocator(6))
+        a3.legend(loc="lower right")
     fig.suptitle(label(f"dt sweep {table.parent.name}"))
     _save(fig, path)
     return None
+
+
+def _omega_b_acc_bound(df: pd.DataFrame) -> float | None:
+    """The ω_b acceleration bound of a sweep's points (their specs', read from a log's
+    metadata), or None when no log is readable or the points differ in it."""
+    from pipeline.logs import read_meta
+
+    bounds = set()
+    for log in df.get("log", pd.Series(dtype=str)).dropna():
+        try:
+            bounds.add(float(read_meta(Path(log)).spec["controller"]["limits"]["omega_b_acc"]))
+        except (LogError, OSError, KeyError, TypeError, ValueError):
+            return None
+    return bounds.pop() if len(bounds) == 1 else None
 
 
 def sweep_key(table: Path) -> str | None:
