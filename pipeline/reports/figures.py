@@ -224,21 +224,29 @@ def divergence_growth(run: RunData, path: Path) -> None:
 
 def lag1_directions(runs: list[RunData], path: Path,
                     styles: dict[str, RunStyle] | None = None) -> None:
-    """Lag-1 autocorrelation of each singular direction of Γ, per run; dominant marked."""
-    styles = _styles(runs, styles)
-    fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
-    width = 0.8 / max(len(runs), 1)
+    """Lag-1 autocorrelation of each singular direction of Γ (eq. 26), one row per run, its
+    value written in its cell and the dominant direction framed: readable for any number of
+    runs (bars side by side were not, past four)."""
+    n_dir = max((len(r.record["directions"]) for r in runs), default=0)
+    grid = np.full((len(runs), n_dir), np.nan)
     for j, r in enumerate(runs):
         d = r.record["directions"]
-        x = np.arange(len(d)) + (j - (len(runs) - 1) / 2) * width
-        ax.bar(x, [e["lag1"] for e in d], width, label=label(r.name),
-               color=styles[r.name].color)
+        grid[j, :len(d)] = [e["lag1"] for e in d]
+    fig, ax = plt.subplots(figsize=(9, 1.2 + 0.42 * len(runs)), layout="constrained")
+    im = ax.imshow(grid, cmap="RdBu", vmin=-1.0, vmax=1.0, aspect="auto")
+    for j, r in enumerate(runs):
+        for i in range(n_dir):
+            if np.isfinite(grid[j, i]):
+                ax.text(i, j, f"{grid[j, i]:+.2f}", ha="center", va="center", fontsize=8,
+                        color="w" if abs(grid[j, i]) > 0.6 else "k")
         dom = r.record["dominant"]["index"]
-        ax.plot(x[dom], d[dom]["lag1"], "k*", ms=9)
-    ax.axhline(0, color="k", lw=0.6)
-    ax.set(title="lag-1 autocorrelation per direction (★ dominant)", xlabel="direction i "
-           "(singular values descending)", ylabel=f"lag-1 r₁ ({DIMLESS})", ylim=(-1.05, 1.05))
-    ax.legend(ncols=3, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+        ax.add_patch(plt.Rectangle((dom - 0.5, j - 0.5), 1, 1, fill=False, lw=2.0, ec="k"))
+    ax.set_yticks(range(len(runs)), [label(r.name) for r in runs])
+    ax.set_xticks(range(n_dir))
+    ax.grid(False)
+    ax.set(title="lag-1 autocorrelation per direction (framed: the dominant one)",
+           xlabel="direction i, singular values descending (index)", ylabel="run")
+    fig.colorbar(im, ax=ax, label=f"lag-1 r₁ ({DIMLESS})", shrink=0.9)
     _save(fig, path)
 
 
