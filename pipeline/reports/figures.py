@@ -22,6 +22,7 @@ from matplotlib.ticker import MaxNLocator
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, read_columns
 from pipeline.sim.sampling import scale_by_svd
+from pipeline.sim.stability import REDUCED_SYMBOLS
 
 # Legends at 8 pt at least: at the page's width a 6–7 pt legend is unreadable.
 plt.rcParams.update({"figure.dpi": 100, "font.size": 9, "legend.fontsize": 8,
@@ -557,7 +558,8 @@ def startup_growth(run: RunData, against: Path, path: Path,
         k = np.arange(k0, min(len(alt), k0 + 12))
         a2.semilogy(c["t"][k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
                     label=f"|λ_dom|^k = {lam:.3g}^k (Φ's dominant eigenvalue)")
-    a1.set(ylabel=f"{name} (rad/s)", title=label(f"{name} over the first half-second"))
+    a1.set(ylabel=f"{REDUCED_SYMBOLS[axis]} (rad/s)",
+           title=label(f"{name} over the first half-second"))
     a2.set(xlabel="t (s)", ylabel="alternating part (rad/s)", ylim=(1e-8, 1.0))
     a1.legend(loc="upper left")
     a2.legend(loc="lower right")
@@ -587,7 +589,7 @@ def mode_psd(run: RunData, against: Path, path: Path,
         ax.loglog(f[1:], np.maximum(p[1:], 1e-30), "-", lw=1.0, color=color, label=label_)
         ax.axvline(0.5 / dt, color=color, ls="--", lw=0.9,
                    label=f"Nyquist of {label_}: 1/(2·{dt:g} s) = {0.5 / dt:.3g} Hz")
-    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {name} (rad²/s²/Hz)",
+    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {REDUCED_SYMBOLS[axis]} (rad²/s²/Hz)",
            title=label(f"{name} over the window: power spectral density"))
     ax.legend(loc="lower left")
     _save(fig, path)

@@ -104,6 +104,8 @@ def posture_stiffness(gamma_inv: np.ndarray, k_posture: float, J_x: np.ndarray) 
 REDUCED_AXES = ("bus ω_b,x", "bus ω_b,y", "bus yaw ω_b,z",
                 "camera ν_e,x", "camera ν_e,y", "camera ν_e,z (along the boresight)",
                 "camera ω_e,x", "camera ω_e,y", "camera roll ω_e,z (about the boresight)")
+# Their symbols alone, for axis labels.
+REDUCED_SYMBOLS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x", "ν_e,y", "ν_e,z", "ω_e,x", "ω_e,y", "ω_e,z")
 BUS_YAW_AXIS = 2  # ω_b,z: the mode μ_bus = D_b/I_zz,bus of the robot card predicts (eq. 21)
 # The 3-blocks of D̆ and the spec's gains that set them (eq. 13).
 GAIN_BLOCKS = ("bus", "cam_pos", "cam_ori")
