@@ -162,11 +162,14 @@ class Plant(_Block):
     """What moves between two control instants (eq. 29): ``reduced``, the simulator's update
     of the closed loop in reduced coordinates (eqs. 15, 22: the commanded velocity is the next
     one), or ``sampled``, the robot's forward dynamics under the command held over the step
-    (zero-order hold), in ``substeps`` RK4 steps, applied ``delay_steps`` instants late."""
+    (zero-order hold), in ``substeps`` RK4 steps, applied ``delay_steps`` instants late, the
+    bus torque saturated at ``bus_torque_max`` (N·m, 0: unbounded)."""
 
     model: Literal["reduced", "sampled"] = "reduced"
     substeps: int = Field(default=8, ge=1, le=10_000)
     delay_steps: int = Field(default=0, ge=0, le=1)
+    # The bus's torque actuators (N·m): the held bus torque's norm saturated to it; 0: none.
+    bus_torque_max: NonNegative = 0.0
 
 
 class Mission(_Block):

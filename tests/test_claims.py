@@ -308,7 +308,8 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "servicer_dt010": "short_servicer_dt010", "servicer_imex": "short_servicer_imex",
         "sampled": "short_omega_ripple_sampled",
         "sampled_dt010": "short_omega_ripple_sampled_dt010",
-        "sampled_delay_dt010": "short_omega_ripple_sampled_delay_dt010"}
+        "sampled_delay_dt010": "short_omega_ripple_sampled_delay_dt010",
+        "sampled_torque": "short_omega_ripple_sampled_torque"}
     assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
                                                         for n, r in full.runs.items()}
     assert {n: r.against for n, r in ci.runs.items()} == {n: r.against

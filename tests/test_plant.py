@@ -111,3 +111,16 @@ def test_the_configuration_rate_is_pinocchios_integrate_differentiated(seed):
     eps = 1e-6
     fd = (pin.integrate(model, q, eps * v) - pin.integrate(model, q, -eps * v)) / (2 * eps)
     assert np.max(np.abs(configuration_rate(q, v) - fd)) <= 1e-9
+
+
+def test_the_bus_torque_limit_bounds_the_norm_and_keeps_the_direction():
+    from pipeline.sim.plant import limit_bus_torque
+
+    tau = np.r_[1.0, -2.0, 3.0, 3.0, -4.0, 12.0, np.arange(6.0)]  # bus torque norm 13
+    out, hit = limit_bus_torque(tau, 6.5)
+    assert hit and np.linalg.norm(out[3:6]) == pytest.approx(6.5, rel=1e-15)
+    assert np.allclose(out[3:6] / 6.5, tau[3:6] / 13.0, rtol=0, atol=1e-15)
+    assert np.array_equal(out[[0, 1, 2, *range(6, 12)]], tau[[0, 1, 2, *range(6, 12)]])
+    for bound in (0.0, 13.0, 20.0):  # no bound, or not exceeded: unchanged
+        out, hit = limit_bus_torque(tau, bound)
+        assert not hit and np.array_equal(out, tau)

@@ -41,7 +41,7 @@ from pipeline.sim.control_step import (
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.linalg import matvec
-from pipeline.sim.plant import held_command, integrate_held
+from pipeline.sim.plant import held_command, integrate_held, limit_bus_torque
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import (
@@ -207,6 +207,7 @@ class Mission:
             if self._held is None:  # before the first command: the one that holds v_0
                 self._held = held_command(model, data, q_k, v_k, np.zeros_like(v_k))
             tau, self._held = self._held, tau
+        tau, _ = limit_bus_torque(tau, plant.bus_torque_max)
         q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps)
         if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
             return False

@@ -60,6 +60,17 @@ def _normalised(q: np.ndarray) -> np.ndarray:
     return q
 
 
+def limit_bus_torque(tau: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
+    """τ with the bus torque (the free flyer's angular entries τ[3:6], bus frame) saturated to
+    norm ``bound`` (eq. 29; 0: no bound), and whether the bound was active."""
+    n = float(np.linalg.norm(tau[3:6]))
+    if bound <= 0.0 or n <= bound:
+        return tau, False
+    out = tau.copy()
+    out[3:6] *= bound / n
+    return out, True
+
+
 def integrate_held(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
                    tau: np.ndarray, dt: float, substeps: int) -> tuple[np.ndarray, np.ndarray]:
     """(q, v) after dt under the held generalized force τ (eq. 29): classical RK4 in
