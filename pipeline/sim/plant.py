@@ -20,7 +20,9 @@ the generalized force, in Pinocchio's convention). For one rigid body spinning a
 principal axis under a held torque −D ω_k, the hold is exact: ω_{k+1} = (1 − dt·D/I) ω_k, the
 forward-Euler map of eq. 23, so a damping mode with dt·μ > 2 rings in the sampled-data loop
 too. The delayed hold (d = 1) applies the command of the previous instant; before the first,
-the command that holds the initial velocity (zero acceleration).
+the command that holds the initial velocity (zero acceleration). ``bus_torque_max`` saturates
+the bus torque of the held command (:func:`limit_bus_torque`), an actuator's limit where the
+loop's own limits bound accelerations.
 """
 
 from __future__ import annotations
