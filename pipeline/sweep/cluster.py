@@ -273,3 +273,8 @@ def _close(cluster, jobs: Jobs | None) -> None:
     except Exception:
         if not (jobs and jobs.errors):
             raise
+        # Closed as far as it goes: without this, the cluster's finaliser warns "unclosed
+        # cluster" at exit, a second stderr line after the sweep's one-line error.
+        from distributed.core import Status
+
+        cluster.status = Status.closed
