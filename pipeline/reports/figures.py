@@ -530,6 +530,29 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
     _save(fig, path)
 
 
+def against_log(run: RunData) -> Path | None:
+    """The log of the run ``run`` is compared with, when both logs are there (the pair's
+    figures need them), else None."""
+    comp = run.record.get("comparison") or {}
+    path = Path(comp["against_log"]) if comp.get("against_log") else None
+    return path if run.log is not None and path is not None and path.is_file() else None
+
+
+def _pair_series(run: RunData, against: Path, styles: dict[str, RunStyle] | None
+                 ) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """(name, colour, t, x) of a run and of the run it is compared with, x the fastest damping
+    mode's reduced coordinate (eq. 21), each log read once; each run in its report colour."""
+    axis = run.record["theory"]["fastest_mode"]["axis"]
+    other = run.record["comparison"]["against"]
+    st = styles or palette([run.name, other])
+    out = []
+    for name, log, color in ((run.name, run.log, st[run.name].color),
+                             (other, against, st[other].color if other in st else "0.45")):
+        c = read_columns(log, ["t", "v_breve"])
+        out.append((name, color, c["t"], c["v_breve"][:, axis]))
+    return out
+
+
 def startup_growth(run: RunData, against: Path, path: Path,
                    styles: dict[str, RunStyle] | None = None) -> None:
     """The fastest damping mode's reduced coordinate (eq. 21) over the first half-second of a
@@ -538,25 +561,21 @@ def startup_growth(run: RunData, against: Path, path: Path,
     dominant eigenvalue predicts (eq. 22) until the saturation holds it."""
     th = run.record["theory"]
     axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
-    other = run.record["comparison"]["against"]
-    st = styles or palette([run.name, other])  # each run in its colour of the whole report
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), layout="constrained", sharex=True)
-    for label_, log, color in ((run.name, run.log, st[run.name].color),
-                               (other, against, st[other].color if other in st else "0.45")):
-        c = read_columns(log, ["t", "v_breve"])
-        keep = c["t"] <= 0.5
-        t, x = c["t"][keep], c["v_breve"][keep, axis]
+    series = _pair_series(run, against, styles)
+    for label_, color, t_all, x_all in series:
+        keep = t_all <= 0.5
+        t, x = t_all[keep], x_all[keep]
         a1.plot(t, x, "-o", ms=3, lw=0.9, color=color, label=label_)
         alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
         a2.semilogy(t[:-2], np.maximum(alt, 1e-18), "o", ms=3, color=color, label=label_)
-    if th["integrator"] == "explicit" and run.log is not None:
-        c = read_columns(run.log, ["t", "v_breve"])
-        x = c["v_breve"][:, axis]
+    if th["integrator"] == "explicit":
+        _, _, t, x = series[0]
         alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
         lam = abs(complex(th["eig_dominant"]["real"], th["eig_dominant"]["imag"]))
         k0 = int(np.argmax(alt > 0))
         k = np.arange(k0, min(len(alt), k0 + 12))
-        a2.semilogy(c["t"][k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
+        a2.semilogy(t[k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
                     label=f"|λ_dom|^k = {lam:.3g}^k (Φ's dominant eigenvalue)")
     a1.set(ylabel=f"{REDUCED_SYMBOLS[axis]} (rad/s)",
            title=label(f"{name} over the first half-second"))
@@ -576,13 +595,8 @@ def mode_psd(run: RunData, against: Path, path: Path,
 
     th = run.record["theory"]
     axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
-    other = run.record["comparison"]["against"]
-    st = styles or palette([run.name, other])
     fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
-    for label_, log, color in ((run.name, run.log, st[run.name].color),
-                               (other, against, st[other].color if other in st else "0.45")):
-        c = read_columns(log, ["t", "v_breve"])
-        t, x = c["t"], c["v_breve"][:, axis]
+    for label_, color, t, x in _pair_series(run, against, styles):
         x = x[len(x) // 2:]
         dt = float(t[1] - t[0])
         f, p = welch(x - x.mean(), fs=1.0 / dt, nperseg=min(256, len(x)))

@@ -6,13 +6,12 @@ generalised eigenvector of the D̆ and M̆ stored there); the wording follows th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-import scipy.linalg as sla
 
 from pipeline.claims.seed_note import NOTE_FILE, fmt, load_note, note_table
-from pipeline.reports.figures import RunData
+from pipeline.reports.figures import RunData, against_log
+from pipeline.sim.stability import damping_modes
 
 V_BREVE_LABELS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x (linear)", "ν_e,y (linear)",
                   "ν_e,z (linear)", "ω_e,x", "ω_e,y", "ω_e,z (camera roll about the boresight)")
@@ -26,13 +25,13 @@ class Verdict:
 
 
 def damping_mode(theory: dict) -> dict:
-    """The fastest damping mode w (D̆ w = μ_max M̆ w) and its largest component's share."""
-    M, D = np.array(theory["M_breve"]), np.array(theory["D_breve"])
-    mu, W = sla.eigh(D, M)
-    w = W[:, -1] / np.linalg.norm(W[:, -1])
+    """The fastest damping mode w (D̆ w = μ_max M̆ w, :func:`damping_modes`) and its largest
+    component's share of the unit vector w."""
+    fastest = damping_modes(np.array(theory["M_breve"]), np.array(theory["D_breve"]))[0]
+    w = fastest.vector / np.linalg.norm(fastest.vector)
     shares = w**2
     i = int(np.argmax(shares))
-    return {"mu_max": float(mu[-1]), "component": V_BREVE_LABELS[i], "index": i,
+    return {"mu_max": fastest.mu, "component": V_BREVE_LABELS[i], "index": i,
             "share": float(shares[i]),
             "shares": [{"label": V_BREVE_LABELS[k], "share": float(shares[k])}
                        for k in np.argsort(-shares)[:3]]}
@@ -100,6 +99,6 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
         "note_rows": note_rows(rec, other), "fmt": fmt, "versions": versions,
-        # The start-up figure is drawn when both logs are there (render.figure_jobs).
-        "startup": run.log is not None and Path(comp.get("against_log", "")).is_file(),
+        # The pair's start-up and spectrum figures are drawn when both logs are there.
+        "startup": against_log(run) is not None,
     }

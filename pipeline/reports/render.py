@@ -121,10 +121,10 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
             f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} of {r.name}, "
             f"explicit and imex, against the unit circle."), partial(fg.eigenvalues, r)))
     for r in runs:
-        comp = r.record.get("comparison") or {}
-        against = Path(comp.get("against_log", "")) if comp else None
-        if not comp or r.log is None or against is None or not against.is_file():
+        against = fg.against_log(r)
+        if against is None:
             continue
+        comp = r.record["comparison"]
         jobs.append((fg.Figure(
             f"figures/startup_{r.folder}.png", f"Start-up of the fastest mode, {r.name}",
             f"The fastest damping mode's coordinate over the first half-second of {r.name} and "
