@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.claims.evaluate import ClaimsOutcome
-from pipeline.claims.record import KIND_NAMES, STATUSES
+from pipeline.claims.record import KIND_NAMES, STATUSES, kind_counts
 from pipeline.claims.seed_note import fmt
 from pipeline.paths import display_path
 from pipeline.reports.templating import render
@@ -16,8 +16,9 @@ def render_claims(outcome: ClaimsOutcome, out_dir: Path) -> Path:
     ctx = {"results": outcome.results, "claims_file": display_path(outcome.claims_file.source),
            "note_rows": outcome.note_rows, "fmt": fmt, "code_version": outcome.source_version,
            "counts": {s: outcome.count(s) for s in STATUSES}, "kind_names": KIND_NAMES,
-           "kinds": [(name, [r for r in outcome.results if r.claim.kind == kind])
-                     for kind, name in KIND_NAMES.items()]}
+           # The same summary as the CLI's and the index's, every status of each kind.
+           "kind_counts": kind_counts({"claims": [{"kind": r.claim.kind, "status": r.status}
+                                                  for r in outcome.results]})}
     md = render("claims.md.j2", Path(out_dir) / "CLAIMS.md", **ctx)
     render("claims.html.j2", Path(out_dir) / "CLAIMS.html", **ctx)
     return md
