@@ -22,7 +22,9 @@ import pyarrow.parquet as pq
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, atomic_write_text
 
-SCHEMA = "breve-analysis/2"  # /2: sim_version and analysis_version (was code_version)
+# /2: sim_version and analysis_version (was code_version); /3: theory.fastest_mode (every damping
+# mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read.
+SCHEMA = "breve-analysis/3"
 RECORD_NAME = "analysis.json"
 TABLE_NAME = "directions.parquet"
 # The stages every record of a complete log holds, and those of a diverged log's record.
