@@ -50,7 +50,8 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
     "abs_gt": (_abs(operator.gt), "|·| >"), "abs_ge": (_abs(operator.ge), "|·| ≥"),
     "close": (lambda a, b: True, "≈"),  # with rel_tol: see compare_values in claims.py
 }
-CLAIMS_SCHEMA = "breve-claims/1"  # the version of the claims.json the register writes
+# /2: each claim carries its kind (physics, note, identity, software), which the reports read.
+CLAIMS_SCHEMA = "breve-claims/2"  # the version of the claims.json the register writes
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
 FIXED_SOURCES = ("cross_check", "baselines", "sweep", "note")
 LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
