@@ -26,11 +26,12 @@ from pipeline.errors import SpecError
 
 STEP_SECONDS = 1.5e-4  # s per step without the target (bench: ~8e-5), with margin
 POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
-# The sampled-data plant (eq. 29) per RK4 substep, and its step's own Pinocchio terms (measured:
-# ~0.17 ms a substep of four ABA calls in Python, ~0.2 ms the terms), with margin.
+# The sampled-data plant (eq. 29) per RK4 substep, and its step's own work (measured: ~0.17 ms a
+# substep of four ABA calls in Python; ~0.3 ms Γ of the new state and the attitude's excursion
+# between the instants; 1.87 ms a step of 8 substeps in all), with margin.
 SUBSTEP_SECONDS = 3e-4
 HOLD_SECONDS = 5e-4
-ROW_FLOATS = 75  # the log row's width (control_step.ROW_SIZE; a test keeps them equal)
+ROW_FLOATS = 100  # the log row's width (control_step.ROW_SIZE; a test keeps them equal)
 ROW_BYTES = 3 * 8 * ROW_FLOATS
 POINT_BYTES = 7 * 8
 MAX_SWEEP_POINTS = 10_000

@@ -248,6 +248,7 @@ def _row() -> None:
 
     from pipeline.sim import control_step as cs
     from pipeline.sim.base_guidance import read_reference
+    from pipeline.sim.plant import commanded_force
     from pipeline.sim.sampling import scale_by_svd
     from pipeline.sim.target import mark_visible
 
@@ -260,7 +261,8 @@ def _row() -> None:
     _compile(cs.read_state, _c(cs.STATE_SIZE))
     _compile(read_reference, _c(1))
     _compile(cs.write_row, _c(cs.ROW_SIZE), _step_state(), _transform_bundle(), 1.0, 1.0, out,
-             1.0, 1.0, 1.0)
+             _c(12), 1.0, 1.0, 1.0)
+    _compile(commanded_force, *(_c(12, 12) for _ in range(4)), _c(12), _c(12), _c(12), 1.0)
     _compile(cs.pointing_errors, _c(3, 3), _c(3), _c(3, 3), _c(3), _c(3))
     _compile(cs.state_is_finite, _c(13), _c(12), _c(9), _c(3))
     _compile(scale_by_svd, 1.0, 1.0, 1.0, 1.0)

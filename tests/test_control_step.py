@@ -187,6 +187,10 @@ def test_swapping_two_row_fields_changes_the_log(distinct_step):
         assert got == want
         rows.append(row)
     assert set(FLAG_BOUNDS) == {name for name, _ in ROW_FIELDS if name.startswith("sat_")}
+    # The kernel writes u_applied as a copy of u_cmd and attitude_excursion_deg as 0 (the
+    # sampled-data plant overwrites both, by name): no swap involving them shows here (0 also
+    # being this step's coverage). test_actuation reads them where they differ.
+    blind = {("u_cmd", "u_applied"), ("coverage", "attitude_excursion_deg")}
     unchanged = []
     for i in range(len(ROW_FIELDS)):
         for j in range(i + 1, len(ROW_FIELDS)):
@@ -195,7 +199,7 @@ def test_swapping_two_row_fields_changes_the_log(distinct_step):
                    <= 1e-8 * np.max(np.abs(r[ROW[name]]))
                    for r in rows for name, _ in ROW_FIELDS):
                 unchanged.append((ROW_FIELDS[i][0], ROW_FIELDS[j][0]))
-    assert unchanged == []
+    assert set(unchanged) <= blind, unchanged
 
 
 def test_svd_right_against_numpy():

@@ -20,6 +20,9 @@ from pipeline.verify.step_from_equations import expected_step
 # here). A swapped gain or field moves them by far more (test_control_step's swap tests).
 EXACT = {"tau", "q", "v", "v_c", "v_breve"}  # the state at the start of the step, copied
 ROW_TOL = 1e-10
+# The commanded force (eq. 29) is M Γ⁻¹((ν⁺ − ν)/dt − Γ̇ v) + C v: it carries the next state's
+# error (1e-9 in v̆⁺, above) divided by dt (measured 4.4e-9 on the nominal scenario).
+FORCE_TOL = 1e-8
 NEXT_TOL = {"q": 1e-12, "v": 1e-9, "v_c": 1e-12, "v_breve": 1e-9, "tau": 1e-15,
             "integral": 1e-12, "v_breve_des_prev": 1e-12}
 
@@ -79,7 +82,8 @@ def test_log_row_against_the_equations(mid_mission_state, scenario):
             np.testing.assert_array_equal(np.asarray(row[name], dtype=float),
                                           np.asarray(want[name], dtype=float), err_msg=name)
         else:
-            _assert_close(row[name], want[name], ROW_TOL, name)
+            tol = FORCE_TOL if name in ("u_cmd", "u_applied") else ROW_TOL
+            _assert_close(row[name], want[name], tol, name)
     for name, tol in NEXT_TOL.items():
         _assert_close(getattr(nxt, name), want_next[name], tol, f"next {name}")
 

@@ -593,3 +593,27 @@ def test_pointing_and_coverage_agree_across_the_three(short_logs):
     assert max(cov.values()) - min(cov.values()) <= 0.02, cov
     assert min(cov.values()) > 0.05, cov
 
+
+
+def test_the_guards_step_warning_names_the_mode_and_its_fixes_with_margins():
+    """The per-step message (dt·μ_max passing 2 along the mission) names the fastest mode and
+    its fixes (eq. 24). On a decoupled M̆ = diag(I), D̆ = diag(d) the closed forms hold: the
+    camera roll's rate is d_o/I_roll, the largest stable gain 2·I_roll/dt, with the margin
+    dt·μ ≤ 1 half of it, and the step with the margin I_roll/d_o."""
+    from pipeline.sim.mission import stability_warning
+    from pipeline.sim.stability import mode_fixes
+
+    inertia = np.array([0.5, 0.5, 10.6, 2, 2, 2, 0.02, 0.02, 0.0102])
+    gains = np.repeat([2.0, 4.0, 1.0], 3)
+    dt = 0.03
+    fixes = mode_fixes(np.diag(inertia), np.diag(gains), dt)
+    w = stability_warning(412, dt * 1.0 / 0.0102, dt, fixes)
+    assert w.startswith("step 412: dt·μ_max = 2.94 > 2")
+    assert "camera roll ω_e,z (about the boresight) mode's" in w
+    stable = float(w.split("controller.gains.cam_ori.D below ")[1].split(" ")[0])
+    margin = float(w.split("(now 1, ")[1].split(" ")[0])
+    dt_margin = float(w.split("mission.dt ≤ ")[1].split(" s")[0])
+    # The other cam_ori axes (I = 0.02) stay below the bound: the roll sets it.
+    assert stable == pytest.approx(2 * 0.0102 / dt, rel=1e-3)
+    assert margin == pytest.approx(0.0102 / dt, rel=1e-3)
+    assert dt_margin == pytest.approx(0.0102 / 1.0, rel=1e-3)

@@ -23,15 +23,17 @@ from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, atomic_write_text
 
 # /2: sim_version and analysis_version (was code_version); /3: theory.fastest_mode (every damping
-# mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read.
-SCHEMA = "breve-analysis/3"
+# mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read;
+# /4: harm (the actuators' torque reversals and the bus attitude jitter, eqs. 30–32) and
+# modes_along (the fastest damping mode named along the whole log, eq. 21).
+SCHEMA = "breve-analysis/4"
 RECORD_NAME = "analysis.json"
 TABLE_NAME = "directions.parquet"
 # The stages every record of a complete log holds, and those of a diverged log's record.
 STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version", "analysis_version",
           "integrator", "dt", "n_steps", "window", "provenance", "directions", "dominant",
-          "theory", "alignment", "velocity_jump", "bus_rate", "metrics", "robot", "bus_mode",
-          "mu_max_log")
+          "theory", "alignment", "velocity_jump", "bus_rate", "metrics", "harm", "robot",
+          "bus_mode", "mu_max_log", "modes_along")
 DIVERGED_STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version",
                    "analysis_version", "integrator", "dt", "n_steps", "status", "diverged_step",
                    "provenance", "divergence", "theory", "robot")

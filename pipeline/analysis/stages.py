@@ -16,6 +16,7 @@ import numpy as np
 
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
+from pipeline.analysis.harm import harm
 from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.logs import (
     LogMeta,
@@ -30,11 +31,12 @@ from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.stability import BUS_YAW_AXIS, mode_fixes
+from pipeline.sim.stability import BUS_YAW_AXIS, damping_modes, mode_fixes
 from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
-            "pointing_err_deg", "boresight_err_deg", "coverage", *LIMIT_FLAGS]
+            "pointing_err_deg", "boresight_err_deg", "coverage", "u_applied",
+            "attitude_excursion_deg", *LIMIT_FLAGS]
 PROVENANCE_TOL = 1e-10  # same kernels on the same q: 0 unless the log or the robot changed
 
 
@@ -132,7 +134,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     ]
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
-    cols = read_columns(path, [c for c in REQUIRED if c not in ("q", "x_tilde", "kappa_G")],
+    cols = read_columns(path, [c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
                         win.start, win.stop)
     rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
     th = theory_at_step(robot, spec, path, win.start + rep.index)
@@ -163,12 +165,15 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         "bus_rate": bus_rate_statistics(cols["v"][:, 3:6], dt,
                                         spec.controller.limits.omega_b_acc),
         "metrics": mission_metrics(cols),
+        "harm": asdict(harm(cols["u_applied"], cols["v"], cols["q"],
+                            cols["attitude_excursion_deg"], dt)),
         "prediction": prediction(th["record"], directions[dom]["lag1"]),
         "versions": meta.versions,
         "robot": asdict(card),
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
         "bus_mode": {"dt_mu_bus": dt * card.mu_bus, "critical_I_zz": dt * card.D_b / 2},
         "mu_max_log": mu_max_along(path, dt, card.mu_bus, robot.floor),
+        "modes_along": fastest_modes_along(robot, spec, path),
     }
 
 
@@ -397,6 +402,32 @@ def mu_max_along(path, dt: float, mu_bus: float, floor: float) -> dict:
             "steps_below_floor": int(np.sum(c["s_min_J"] < floor))}
 
 
+MODE_SAMPLES = 60  # steps, evenly spaced over the log, at which every damping mode is named
+
+
+def fastest_modes_along(robot: GiordanoRobot, spec: Spec, path, samples: int = MODE_SAMPLES
+                        ) -> dict:
+    """The fastest damping mode of M̆⁻¹D̆ named at ``samples`` steps spread evenly over the
+    whole log (eq. 21), M̆ rebuilt from the logged (q, v), D̆ from the gains and the logged γ:
+    how often each mode is the fastest, and the largest dt·μ_max with its step and mode. The
+    online guard logs dt·μ_max at every step but not whose it is."""
+    c = read_columns(path, ["q", "v", "gamma"])
+    n, dt = len(c["gamma"]), spec.mission.dt
+    steps = np.unique(np.linspace(0, n - 1, min(samples, n)).round().astype(int))
+    names, dt_mus = [], []
+    for k in steps:
+        T = robot.terms(c["q"][k], c["v"][k])
+        _, D = block_gains(spec.controller, float(c["gamma"][k]))
+        fastest = damping_modes(T.reduced_inertia, D)[0]
+        names.append(fastest.name)
+        dt_mus.append(dt * fastest.mu)
+    worst = int(np.argmax(dt_mus))
+    return {"samples": int(steps.size),
+            "share": {name: names.count(name) / len(names) for name in dict.fromkeys(names)},
+            "dt_mu_max": float(dt_mus[worst]), "step_of_max": int(steps[worst]),
+            "name_at_max": names[worst], "dt_mu_min": float(min(dt_mus))}
+
+
 def mission_metrics(cols: dict[str, np.ndarray]) -> dict:
     """Window metrics: pointing and boresight errors, coverage, and how often each limit bound."""
     return {
@@ -422,6 +453,12 @@ COMPARE_ROWS = (
     ("bus rate ω_b: lag-1 of its dominant component", ("bus_rate", "lag1")),
     ("bus rate ω_b: alternating RMS (rad/s)", ("bus_rate", "alternating_rms")),
     ("provenance max |Δσ_min|", ("provenance", "max_abs_s_min_G")),
+    ("bus torque: RMS (N·m)", ("harm", "bus_torque", "rms")),
+    ("bus torque: period-2 amplitude (N·m)", ("harm", "bus_torque", "period2_amplitude")),
+    ("bus torque: reversals per second", ("harm", "bus_torque", "reversals_per_s")),
+    ("joint torque: period-2 amplitude (N·m)", ("harm", "joint_torque", "period2_amplitude")),
+    ("joint rate: reversals per second", ("harm", "joint_rate", "reversals_per_s")),
+    ("bus attitude jitter (deg)", ("harm", "attitude", "jitter_deg")),
     ("max pointing error (deg)", ("metrics", "pointing_err_deg_max")),
     ("final coverage", ("metrics", "coverage_final")),
 )

@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.analysis.record import RECORD_NAME
 from pipeline.analysis.signals import lag1_autocorrelation
-from pipeline.claims.record import write_claims_json
+from pipeline.claims.record import read_claims_json, write_claims_json
 from pipeline.claims.register import (
     LOG_GROUPS,
     OPERATORS,
@@ -278,14 +278,15 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
     return out
 
 
-def seed_table(ctx: Context) -> list:
-    """The note's evidence table beside the claims' runs of its columns (by run name)."""
+def seed_table(ctx: Context, claims: list[dict]) -> list:
+    """The note's evidence table beside the claims' runs of its columns (by run name), each
+    cell judged by the evaluated ``claims`` (claims.json's)."""
     from pipeline.claims.seed_note import COLUMNS, note_table
 
     note = ctx.note()
     if note is None:
         return []
-    return note_table(note, {c: ctx.analyses[c] for c in COLUMNS if c in ctx.analyses})
+    return note_table(note, {c: ctx.analyses[c] for c in COLUMNS if c in ctx.analyses}, claims)
 
 
 @dataclass(frozen=True)
@@ -317,6 +318,8 @@ def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
         ctx.stop_sweeps()  # one still running when a mission or a claim failed
     version = source_version()
     path = write_claims_json(results, cf, out, version)
-    return ClaimsOutcome(cf, results, seed_table(ctx), version, path, tuple(ctx.files),
+    written = read_claims_json(path)
+    return ClaimsOutcome(cf, results, seed_table(ctx, written["claims"] if written else []),
+                         version, path, tuple(ctx.files),
                          ctx.cross_check_result)
 

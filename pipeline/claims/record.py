@@ -41,7 +41,9 @@ def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,
                                     "rel_tol": c.check.rel_tol,
                                     "value": _jsonable(c.value),
-                                    "threshold": _jsonable(c.threshold), "ok": c.ok}
+                                    "threshold": _jsonable(c.threshold),
+                                    "threshold_metric": c.check.threshold_metric,
+                                    "ok": c.ok}
                                    for c in r.checks],
                         "provenance": r.provenance} for r in results]}
     atomic_write_text(path, json.dumps(data, indent=1, default=str))
@@ -75,6 +77,20 @@ def status_counts(data: dict) -> str:
 # How the summaries name each kind of claim (pipeline/claims/register.py's CLAIM_KINDS).
 KIND_NAMES = {"physics": "physics findings", "note": "note rows", "identity": "input identities",
               "software": "software checks", None: "unclassified"}
+# What each kind is, as the register's sections say it.
+KIND_INTROS = {
+    "physics": "What the measurements show about the loop: the argument of the reports. Each is "
+               "measured on the runs' logs and can fail.",
+    "note": "The seed note's published rows, each against our measurement of the same "
+            "quantity (the evidence table below lays them side by side).",
+    "identity": "These restate an input rather than find anything: μ_bus = D_b/I_zz,bus "
+                "(the spec's bus damping gain over the robot file's bus inertia about the "
+                "shoulder-pan axis) and what follows from it at the given dt. They are shown "
+                "once, here, as the inputs they are, and guard that the inputs are the note's.",
+    "software": "The inputs, the code and the artefacts: the cross-check of equations and "
+                "code, the baselines' reproducibility, the logs' provenance.",
+    None: "Claims without a kind.",
+}
 
 
 def kind_counts(data: dict) -> str:

@@ -3,7 +3,11 @@
 The note's numbers are data, read and validated here; each row pairs a value the note prints
 with the path of our value in a run's analysis.json. :func:`note_table` lays them side by side
 with the difference, for the mechanism report and CLAIMS.md; the claims compare against the
-same values through the ``note:`` metric source.
+same values through the ``note:`` metric source. Given the evaluated claims (claims.json's
+``claims``), each cell also carries its judgement: the claim whose check reads our value,
+that check's condition (the tolerance) and its outcome. A row of round-off values (the note's
+``roundoff: true``) is shown as round-off, without a relative difference between two
+rounding errors.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ class NoteRow(_Strict):
     ours: str = Field(min_length=1)
     ours_label: str = ""
     also: dict[str, str] = Field(default_factory=dict)
+    roundoff: bool = False  # both values are floating-point rounding: no relative difference
 
 
 class SeedNote(_Strict):
@@ -87,20 +92,47 @@ def _dig(record: dict, path: str) -> float | None:
 
 
 @dataclass(frozen=True)
+class Judgement:
+    """What the register says of one cell: the claim whose check reads our value, the check's
+    condition on it and the outcome."""
+
+    claim: str  # the claim's id
+    status: str  # the claim's status (PASS, FAIL, OPEN, NOW HOLDS)
+    tolerance: str  # the check's condition, e.g. "within 2 %" or "< -0.9"
+    ok: bool  # whether that check holds
+    reason: str  # the claim's reason when it is expected open
+
+
+@dataclass(frozen=True)
 class Cell:
-    """One column of one row: the note's value, ours, and our other readings."""
+    """One column of one row: the note's value, ours, our other readings, the judgement."""
 
     column: str
     note: float | None
     ours: float | None
     also: tuple[tuple[str, float | None], ...]
+    roundoff: bool = False
+    judgement: Judgement | None = None
 
     @property
     def rel_diff(self) -> float | None:
-        """(ours − note)/|note|, None where either is missing or the note's value is 0."""
-        if self.note is None or self.ours is None or self.note == 0:
+        """(ours − note)/|note|, None where either is missing, the note's value is 0 or both
+        are round-off."""
+        if self.roundoff or self.note is None or self.ours is None or self.note == 0:
             return None
         return (self.ours - self.note) / abs(self.note)
+
+    @property
+    def verdict(self) -> str:
+        """agrees, differs, round-off, no number (in the note) or not judged (by a claim)."""
+        j = self.judgement
+        if self.roundoff:
+            return "round-off" if j is None or j.ok else "differs"
+        if self.note is None:
+            return "no number"
+        if j is None:
+            return "not judged"
+        return "agrees" if j.ok else "differs"
 
 
 @dataclass(frozen=True)
@@ -111,9 +143,41 @@ class TableRow:
     cells: tuple[Cell, ...]
 
 
-def note_table(note: SeedNote, records: dict[str, dict]) -> list[TableRow]:
-    """The note's rows beside our values from ``records`` (column → analysis record); a column
-    without a record shows the note's value alone."""
+def _condition(check: dict) -> str:
+    if check["op"] == "close":
+        return f"within {100 * check['rel_tol']:g} %"
+    symbols = {"lt": "<", "le": "≤", "gt": ">", "ge": "≥", "eq": "=", "ne": "≠",
+               "abs_lt": "|·| <", "abs_le": "|·| ≤", "abs_gt": "|·| >", "abs_ge": "|·| ≥"}
+    return f"{symbols.get(check['op'], check['op'])} {check['threshold']:g}" if isinstance(
+        check["threshold"], int | float) else f"{check['op']} {check['threshold']}"
+
+
+def judgement(claims: list[dict], key: str, column: str, path: str) -> Judgement | None:
+    """The claim that judges row ``key``'s cell in ``column`` (claims.json's claims): the
+    first with a check of run ``column``'s value at ``path`` against the note's value
+    (``note:KEY.COLUMN``), else the first note-row claim with a check of it, else the first
+    claim at all; None when no claim reads the value. All its checks of that value make the
+    tolerance, and hold together or not."""
+    metric = f"{column}:{path}"
+    reading = [c for c in claims if any(k["metric"] == metric for k in c["checks"])]
+    against_note = [c for c in reading if any(
+        k["metric"] == metric and k.get("threshold_metric") == f"note:{key}.{column}"
+        for k in c["checks"])]
+    note_rows = [c for c in reading if c.get("kind") == "note"]
+    chosen = (against_note or note_rows or reading or [None])[0]
+    if chosen is None:
+        return None
+    checks = [k for k in chosen["checks"] if k["metric"] == metric]
+    return Judgement(chosen["id"], chosen["status"], " and ".join(map(_condition, checks)),
+                     all(bool(k["ok"]) for k in checks),
+                     chosen.get("reason", "") if chosen.get("expect") == "open" else "")
+
+
+def note_table(note: SeedNote, records: dict[str, dict],
+               claims: list[dict] | None = None) -> list[TableRow]:
+    """The note's rows beside our values from ``records`` (column → analysis record), each
+    cell judged by ``claims`` (claims.json's, whose runs are named as the columns) when
+    given; a column without a record shows the note's value alone."""
     out = []
     for r in note.rows:
         cells = []
@@ -121,9 +185,22 @@ def note_table(note: SeedNote, records: dict[str, dict]) -> list[TableRow]:
             rec = records.get(col)
             ours = _dig(rec, r.ours) if rec else None
             also = tuple((label, _dig(rec, p) if rec else None) for label, p in r.also.items())
-            cells.append(Cell(col, getattr(r, col), ours, also))
+            j = judgement(claims, r.key, col, r.ours) if claims and rec else None
+            cells.append(Cell(col, getattr(r, col), ours, also, r.roundoff, j))
         out.append(TableRow(r.key, r.row, r.ours_label, tuple(cells)))
     return out
+
+
+def differences(rows: list[TableRow]) -> list[tuple[str, str, str]]:
+    """Where our missions differ from the note's: (claim id, the note's row, the claim's
+    reason) for each claim expected open that judges a cell of the table, once each."""
+    seen: dict[str, tuple[str, str, str]] = {}
+    for r in rows:
+        for c in r.cells:
+            j = c.judgement
+            if j is not None and j.reason and j.claim not in seen:
+                seen[j.claim] = (j.claim, r.row, j.reason)
+    return list(seen.values())
 
 
 def fmt(x: float | None) -> str:

@@ -9,8 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.claims.seed_note import NOTE_FILE, fmt, load_note, note_table
+from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
+from pipeline.reports.templating import num
 from pipeline.sim.stability import damping_modes
 
 V_BREVE_LABELS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x (linear)", "ν_e,y (linear)",
@@ -68,16 +69,63 @@ def robot_card(rec: dict) -> dict:
     return card
 
 
-def note_rows(rec: dict, other: dict) -> list:
-    """The seed note's table beside this pair, when the pair is the note's own (its runs)."""
+# The harm table of section 7 (eqs. 30–32): label, unit, the record's value, and the field
+# naming the channel it was measured on (or None).
+HARM_ROWS = (
+    ("max z_b pointing error", "deg", ("metrics", "pointing_err_deg_max"), None),
+    ("final coverage", "", ("metrics", "coverage_final"), None),
+    ("bus torque, RMS of ‖τ_b‖", "N·m", ("harm", "bus_torque", "rms"), None),
+    ("bus torque, period-2 amplitude", "N·m", ("harm", "bus_torque", "period2_amplitude"),
+     ("harm", "bus_torque", "channel")),
+    ("bus torque, reversal share", "", ("harm", "bus_torque", "reversal_share"),
+     ("harm", "bus_torque", "channel")),
+    ("bus torque, reversals per second", "1/s", ("harm", "bus_torque", "reversals_per_s"),
+     ("harm", "bus_torque", "channel")),
+    ("joint torque, period-2 amplitude", "N·m", ("harm", "joint_torque", "period2_amplitude"),
+     ("harm", "joint_torque", "channel")),
+    ("joint torque, reversal share", "", ("harm", "joint_torque", "reversal_share"),
+     ("harm", "joint_torque", "channel")),
+    ("joint rate, period-2 amplitude", "rad/s", ("harm", "joint_rate", "period2_amplitude"),
+     ("harm", "joint_rate", "channel")),
+    ("joint rate, reversal share", "", ("harm", "joint_rate", "reversal_share"),
+     ("harm", "joint_rate", "channel")),
+    ("bus attitude jitter", "deg", ("harm", "attitude", "jitter_deg"), None),
+    ("… at the control instants", "deg", ("harm", "attitude", "at_instants_deg"), None),
+    ("… between them", "deg", ("harm", "attitude", "between_instants_deg"), None),
+)
+
+
+def _dig(rec: dict, path: tuple[str, ...]):
+    for key in path:
+        rec = rec[key]
+    return rec
+
+
+def harm_table(rec: dict, other: dict) -> list[dict]:
+    """Section 7's rows for the pair: each quantity of ``HARM_ROWS``, formatted, with the
+    channel it was measured on."""
+    def cell(r: dict, path, channel) -> str:
+        value = num(_dig(r, path))
+        return f"{value} ({_dig(r, channel)})" if channel else value
+
+    return [{"quantity": f"{label} ({unit})" if unit else label,
+             "a": cell(rec, path, channel), "b": cell(other, path, channel)}
+            for label, unit, path, channel in HARM_ROWS]
+
+
+def note_rows(rec: dict, other: dict, claims: dict | None = None) -> list:
+    """The seed note's table beside this pair, when the pair is the note's own (its runs),
+    judged by the register's ``claims`` (claims.json) when given."""
     note = load_note(NOTE_FILE)
     if (rec["spec_name"], other["spec_name"]) != (note.runs["nominal"], note.runs["dt010"]):
         return []
-    return note_table(note, {"nominal": rec, "dt010": other})
+    return note_table(note, {"nominal": rec, "dt010": other},
+                      claims["claims"] if claims else None)
 
 
-def mechanism_context(run: RunData, others: list[RunData]) -> dict:
-    """Everything the mechanism templates show, for ``run`` and its comparison."""
+def mechanism_context(run: RunData, others: list[RunData], claims: dict | None = None) -> dict:
+    """Everything the mechanism templates show, for ``run`` and its comparison; ``claims``
+    (claims.json) judges the seed note's table."""
     rec = run.record
     comp = rec["comparison"]
     other = comp["other"]
@@ -88,6 +136,7 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
     flipped = sum(d["lag1"] > LAG1_SMOOTH for d in other["directions"])
     limits = sorted(((k, v) for k, v in rec["metrics"]["limit_share"].items() if v > 0),
                     key=lambda kv: -kv[1])
+    table = note_rows(rec, other, claims)
     fixes = [o for o in others if o.record["integrator"] == "imex"
              and o.record["dt"] == rec["dt"] and o.name != run.name]
     return {
@@ -98,7 +147,9 @@ def mechanism_context(run: RunData, others: list[RunData]) -> dict:
         "fix_runs": fixes, "diag_D": np.diag(np.array(th["D_breve"])).tolist(),
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
-        "note_rows": note_rows(rec, other), "fmt": fmt, "versions": versions,
+        "note_rows": table, "note_labels": names, "note_differences": differences(table),
+        "fmt": fmt, "versions": versions,
+        "harm_rows": harm_table(rec, other),
         # The pair's start-up and spectrum figures are drawn when both logs are there.
         "startup": against_log(run) is not None,
     }

@@ -229,7 +229,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
         for r in runs:
             if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
                 continue
-            ctx = mechanism_context(r, runs)
+            ctx = mechanism_context(r, runs, claims)
             folder = out / r.folder
             written += [render("mechanism.md.j2", folder / "mechanism.md", **ctx),
                         render("mechanism.html.j2", folder / "mechanism.html", **ctx)]

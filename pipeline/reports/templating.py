@@ -65,6 +65,15 @@ def cell(x) -> str:
     return _TAGLIKE.sub(lambda m: "&lt;" + m.group(0)[1:], s)
 
 
+_SENTENCE_END = re.compile(r"\.\s+(?=[A-Z(])")
+
+
+def first_sentence(text: str) -> str:
+    """The first sentence of ``text``: up to a full stop followed by a capital (an
+    abbreviation such as "eq. 31" does not end one), without the stop."""
+    return _SENTENCE_END.split(str(text), maxsplit=1)[0].rstrip(".")
+
+
 def href(path: str) -> str:
     """A relative link with each path segment percent-encoded."""
     return "/".join(quote(part) for part in str(path).split("/"))
@@ -81,7 +90,8 @@ def environment() -> Environment:
     env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=_autoescape,
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
                       keep_trailing_newline=True)
-    env.filters.update(num=num, sci=sci, cell=cell, href=href, val=val, rel=rel)
+    env.filters.update(num=num, sci=sci, cell=cell, href=href, val=val, rel=rel,
+                       first_sentence=first_sentence)
     return env
 
 

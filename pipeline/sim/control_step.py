@@ -24,6 +24,7 @@ from pipeline.sim.jit import jit
 from pipeline.sim.layout import field_places, offsets
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import dot, matvec
+from pipeline.sim.plant import commanded_force
 from pipeline.sim.rotations import attitude_error
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.target import mark_visible
@@ -39,9 +40,10 @@ STATE_AT = field_places("StatePlaces", STATE_FIELDS)
 
 # One log row (architecture §6), written by the kernel; the mission fills ``t`` and ``step``.
 ROW_FIELDS = (("tau", 1), ("q", 13), ("v", 12), ("v_c", 3), ("v_breve", 9), ("v_breve_des", 9),
-              ("x_tilde", 9), ("s_min_G", 1), ("kappa_G", 1), ("s_min_J", 1), ("kappa_J", 1),
-              ("gamma", 1), ("dt_mu_max", 1), ("pointing_err_deg", 1), ("boresight_err_deg", 1),
-              ("com_err", 1), ("coverage", 1), *((f, 1) for f in LIMIT_FLAGS))
+              ("x_tilde", 9), ("u_cmd", 12), ("u_applied", 12), ("s_min_G", 1), ("kappa_G", 1),
+              ("s_min_J", 1), ("kappa_J", 1), ("gamma", 1), ("dt_mu_max", 1),
+              ("pointing_err_deg", 1), ("boresight_err_deg", 1), ("com_err", 1), ("coverage", 1),
+              ("attitude_excursion_deg", 1), *((f, 1) for f in LIMIT_FLAGS))
 ROW = offsets(ROW_FIELDS)
 ROW_SIZE = sum(n for _, n in ROW_FIELDS)
 ROW_AT = field_places("RowPlaces", ROW_FIELDS)
@@ -201,10 +203,12 @@ def state_is_finite(q, v, v_breve, v_c) -> bool:
 
 
 @jit
-def write_row(row, s, tr, gamma, dt, out, pointing, boresight, coverage):
+def write_row(row, s, tr, gamma, dt, out, u, pointing, boresight, coverage):
     """Log row k (``ROW_FIELDS``) by name: the state ``s`` at the start of the step, the
-    transform's conditioning, γ, dt·μ_max, the loops' ``out`` (``LoopResult``), the pointing
-    errors and the coverage fraction."""
+    transform's conditioning, γ, dt·μ_max, the loops' ``out`` (``LoopResult``), the commanded
+    generalized force ``u`` (eq. 29; the plant of eq. 15 applies it as it is, the sampled-data
+    plant overwrites ``u_applied`` and ``attitude_excursion_deg``), the pointing errors and the
+    coverage fraction."""
     row[ROW_AT.tau] = s.tau
     row[ROW_AT.q] = s.q
     row[ROW_AT.v] = s.v
@@ -212,6 +216,8 @@ def write_row(row, s, tr, gamma, dt, out, pointing, boresight, coverage):
     row[ROW_AT.v_breve] = s.v_breve
     row[ROW_AT.v_breve_des] = out.v_breve_des
     row[ROW_AT.x_tilde] = out.x_tilde
+    row[ROW_AT.u_cmd] = u
+    row[ROW_AT.u_applied] = u
     row[ROW_AT.s_min_G] = tr.s_min_G
     row[ROW_AT.kappa_G] = tr.kappa_G
     row[ROW_AT.s_min_J] = tr.s_min_J
@@ -222,6 +228,9 @@ def write_row(row, s, tr, gamma, dt, out, pointing, boresight, coverage):
     row[ROW_AT.boresight_err_deg] = boresight
     row[ROW_AT.com_err] = math.sqrt(dot(out.com_pos_err, out.com_pos_err))
     row[ROW_AT.coverage] = coverage
+    # The update of eq. 15 turns the bus at a constant rate over the step: no excursion from
+    # the geodesic between the instants (eq. 32). The sampled-data plant overwrites it.
+    row[ROW_AT.attitude_excursion_deg] = 0.0
     row[ROW_AT.sat_omega_b_acc] = 1.0 if out.hit_acc[0] else 0.0
     row[ROW_AT.sat_omega_b_rate] = 1.0 if out.hit_rate[0] else 0.0
     row[ROW_AT.sat_nu_e_lin_acc] = 1.0 if out.hit_acc[1] else 0.0
@@ -259,11 +268,18 @@ def controller_step(inputs, ref, ctrl, state, rows, k, coverage):
         p.k[0:3] *= gamma
         p.d[0:3] *= gamma
     out = loop_update(pose, tr, r, p, s, gamma, np.diag(p.k), np.diag(p.d))
+    nu = np.empty(12)
+    nu[0:3] = s.v_c
+    nu[3:12] = s.v_breve
+    nu_next = np.empty(12)
+    nu_next[0:3] = out.v_c
+    nu_next[3:12] = out.v_breve
+    u = commanded_force(pose.M, pose.C, tr.gamma_inv, tr.gamma_dot, s.v, nu, nu_next, p.dt)
     pointing, boresight = pointing_errors(pose.R_tb, pose.p_b, pose.R_te, pose.p_e, r.aim)
     coverage.count[0] += mark_visible(coverage.points, coverage.normals, pose.p_e, pose.R_te,
                                       coverage.tan_half_fov, coverage.d_min, coverage.d_max,
                                       coverage.cos_max, coverage.seen)
-    write_row(rows[k], s, tr, gamma, p.dt, out, pointing, boresight,
+    write_row(rows[k], s, tr, gamma, p.dt, out, u, pointing, boresight,
               coverage.count[0] / coverage.seen.size)
 
     state[STATE_AT.v] = out.v

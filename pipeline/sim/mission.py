@@ -41,7 +41,12 @@ from pipeline.sim.control_step import (
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
 from pipeline.sim.linalg import matvec
-from pipeline.sim.plant import held_command, integrate_held, limit_bus_torque
+from pipeline.sim.plant import (
+    attitude_excursion,
+    held_command,
+    integrate_held,
+    limit_bus_torque,
+)
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import (
@@ -58,6 +63,8 @@ _Q, _V, _TAU, _DQ = STATE["q"], STATE["v"], STATE["tau"].start, STATE["dq"]
 _VC, _VB = STATE["v_c"], STATE["v_breve"]
 _DT_MU = ROW["dt_mu_max"].start
 _SAT_V_MAX = ROW["sat_v_max"].start
+_U_CMD, _U_APPLIED = ROW["u_cmd"], ROW["u_applied"]
+_EXCURSION = ROW["attitude_excursion_deg"].start
 
 # Divergence criterion (eq. 16): the v_max clip binding on this many consecutive steps. The
 # clip is the last guard, far above any commanded motion (50 against rate limits below 1), so
@@ -172,45 +179,45 @@ class Mission:
     def _advance(self, k: int, state: np.ndarray, rows: np.ndarray, ctrl: np.ndarray,
                  coverage: CoverageCounter) -> bool:
         """Step k: Pinocchio at (q_k, v_k), the references, one call of the step kernel (row k
-        and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt. Whether the new
-        state is finite."""
+        and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt, or the
+        sampled-data plant's motion under the held command (eq. 29). Whether the new state is
+        finite."""
         robot, ref = self.robot, self._reference
         sampled = self.spec.mission.plant.model == "sampled"
-        if sampled:  # what the plant is at: (q_k, v_k) and ν_k = Γ(q_k) v_k, measured
+        if sampled:  # what the plant is at: (q_k, v_k)
             q_k, v_k = state[_Q].copy(), state[_V].copy()
-            nu_k = np.concatenate([state[_VC], state[_VB]])
         inputs = robot.dynamics_inputs(state[_Q], state[_V])
         self.guidance.reference_into(ref, float(state[_TAU]), inputs.p_b)
         finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage)
         if sampled:
-            return finite and self._hold(state, q_k, v_k, nu_k)
+            return finite and self._hold(state, rows[k], q_k, v_k)
         q_new = pin.integrate(robot.model, state[_Q], state[_DQ])
         state[_Q] = q_new
         # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
         return finite and math.isfinite(q_new @ self._zero_q)
 
-    def _hold(self, state: np.ndarray, q_k: np.ndarray, v_k: np.ndarray,
-              nu_k: np.ndarray) -> bool:
-        """The sampled-data plant (eq. 29): the step's commanded reduced acceleration
-        ν̇ = (ν_{k+1} − ν_k)/dt as the generalized acceleration a = Γ⁻¹(ν̇ − Γ̇ v) and its
-        generalized force at (q_k, v_k), held (``delay_steps`` late) while the robot's forward
-        dynamics move it over dt; the controller then measures ν = Γ(q) v. Whether the state
-        is finite."""
+    def _hold(self, state: np.ndarray, row: np.ndarray, q_k: np.ndarray,
+              v_k: np.ndarray) -> bool:
+        """The sampled-data plant (eq. 29): the step's commanded generalized force (the row's
+        ``u_cmd``, from the kernel), held (``delay_steps`` late, the bus torque saturated to
+        ``bus_torque_max``) while the robot's forward dynamics move it over dt; the row's
+        ``u_applied`` is what the plant received, and the controller then measures
+        ν = Γ(q) v. Whether the state is finite."""
         model, data, plant = self.robot.model, self._plant_data, self.spec.mission.plant
-        nu_cmd = np.concatenate([state[_VC], state[_VB]])
-        if not np.all(np.isfinite(nu_cmd)):
+        tau = row[_U_CMD].copy()
+        if not np.all(np.isfinite(tau)):
             return False
-        T = self.robot.terms(q_k, v_k)
-        a = matvec(T.gamma_inv, (nu_cmd - nu_k) / self.dt - matvec(T.gamma_dot, v_k))
-        tau = held_command(model, data, q_k, v_k, a)
         if plant.delay_steps:
             if self._held is None:  # before the first command: the one that holds v_0
                 self._held = held_command(model, data, q_k, v_k, np.zeros_like(v_k))
             tau, self._held = self._held, tau
         tau, _ = limit_bus_torque(tau, plant.bus_torque_max)
-        q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps)
+        row[_U_APPLIED] = tau
+        path: list[np.ndarray] = []
+        q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps, path)
         if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
             return False
+        row[_EXCURSION] = math.degrees(attitude_excursion(q_k, path))
         nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
         state[_Q], state[_V], state[_VC], state[_VB] = q, v, nu[:3], nu[3:]
         return True
@@ -292,7 +299,9 @@ class Mission:
                     flush(i)
                     return result("failed", k, k, f"step {k}: {why}")
                 if explicit and not warned and rows[i, _DT_MU] > 2:
-                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), self.dt))
+                    M, D, _, _ = self.linearised_loop(row_state(rows[i]))
+                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), self.dt,
+                                                    mode_fixes(M, D, self.dt)))
                 clipped = clipped + 1 if rows[i, _SAT_V_MAX] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
                     flush(i + 1)
@@ -319,6 +328,24 @@ def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, 
     return cols
 
 
+def row_state(row: np.ndarray) -> LoopState:
+    """The state at the start of a logged step, from its row (``ROW_FIELDS``)."""
+    return LoopState(q=row[ROW["q"]].copy(), v=row[ROW["v"]].copy(), v_c=row[ROW["v_c"]].copy(),
+                     v_breve=row[ROW["v_breve"]].copy(), tau=float(row[ROW["tau"].start]))
+
+
+def _fix_text(fixes: ModeFixes) -> str:
+    """The gain and margin fixes of the fastest mode (eq. 24), for the guard's messages."""
+    gain = ""
+    if fixes.gain_stable is not None:
+        margin = (f", {fixes.gain_margin:.4g} with the margin dt·μ ≤ 1"
+                  if fixes.gain_margin is not None else "")
+        gain = (f", or controller.gains.{fixes.gain_block}.D below {fixes.gain_stable:.4g} "
+                f"(now {fixes.gain:.4g}{margin})")
+    return (f"{gain}; with the margin dt·μ ≤ 1 (the bound under one step of delay) mission.dt "
+            f"≤ {fixes.dt_margin:.4g} s")
+
+
 def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) -> str:
     """Why a run was stopped as diverged, with the bound and the fix (eqs. 16, 21, 24)."""
     dt_star = 2 * dt / dt_mu_max
@@ -332,13 +359,11 @@ def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) 
 def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str,
                 fixes: ModeFixes) -> str:
     """The online guard's message when mission.dt is past the map's critical step (eq. 24),
-    naming the fastest damping mode and the gain that would fix it (eq. 21)."""
+    naming the fastest damping mode and the gain that would fix it, with their margins
+    (eq. 21)."""
     fix = ("set controller.integrator: imex, or mission.dt below" if integrator == "explicit"
            else "set mission.dt below")
-    gain = ""
-    if integrator == "explicit" and fixes.gain_stable is not None:
-        gain = (f", or controller.gains.{fixes.gain_block}.D below {fixes.gain_stable:.4g} "
-                f"(now {fixes.gain:.4g}; the damping-only bound, dt·μ_max < 2)")
+    gain = _fix_text(fixes) if integrator == "explicit" else ""
     return (f"step 0: mission.dt = {dt:.4g} s is at or above the critical step dt*_map = "
             f"{dt_map:.4g} s (the spectral radius of the discrete map Φ, stiffness included, "
             f"reaches 1; the damping-only bound dt*_damping = 2/μ_max = {dt_damping:.4g} s, "
@@ -346,9 +371,11 @@ def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str,
             f"unstable. Fix: {fix} {dt_map:.4g} s{gain}")
 
 
-def stability_warning(step: int, dt_mu_max: float, dt: float) -> str:
-    """The online guard's one message (eq. 21): name the bound and both fixes."""
+def stability_warning(step: int, dt_mu_max: float, dt: float, fixes: ModeFixes) -> str:
+    """The online guard's one message (eq. 21): name the mode at that step, the bound and the
+    fixes, with their margins (eq. 24)."""
     dt_star = 2 * dt / dt_mu_max
     return (f"step {step}: dt·μ_max = {dt_mu_max:.3g} > 2 under the explicit integrator: the "
-            f"velocity damping is period-2 unstable (forward Euler). Fix: set "
-            f"controller.integrator: imex, or mission.dt below dt* = 2/μ_max = {dt_star:.4g} s")
+            f"{fixes.mode.name} mode's velocity damping is period-2 unstable (forward Euler). "
+            f"Fix: set controller.integrator: imex, or mission.dt below dt* = 2/μ_max = "
+            f"{dt_star:.4g} s{_fix_text(fixes)}")

@@ -1,4 +1,5 @@
-"""Checks of the analysis equations (eqs. 25–28) against plain re-implementations."""
+"""Checks of the analysis equations (eqs. 25–28, 30–32) against plain re-implementations
+and synthetic signals of known answer."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import math
 
 import numpy as np
 
-from pipeline.verify.checks_base import Outcome, check, rng
+from pipeline.verify.checks_base import Outcome, check, maxdiff, rng
 
 
 @check("25", "lag-1 autocorrelation vs an explicit loop over the definition; −1 for an "
@@ -67,6 +68,58 @@ def _velocity_jumps() -> Outcome:
                    1e-13)
 
 
+@check("30", "period-2 amplitude of a(−1)^k on a linear trend (reads a) and of a sine at a "
+       "tenth of Nyquist (reads its Δ²/4 in closed form)",
+       "pipeline.analysis.harm.period2_amplitude")
+def _period2_amplitude() -> Outcome:
+    from pipeline.analysis.harm import period2_amplitude
+
+    k = np.arange(402)  # Δ² has 400 samples: 20 whole periods of the sine
+    a, w = 0.156, np.pi / 10
+    x = np.c_[a * (-1.0) ** k + 0.01 * k - 3.0, np.sin(w * k)]
+    # Δ²sin(wk) = −4 sin²(w/2) sin(w(k+1)): RMS over whole periods is 4 sin²(w/2)/√2.
+    ref = [a, 4 * math.sin(w / 2) ** 2 / math.sqrt(2) / 4]
+    return Outcome("402 samples: an alternating 0.156 on a ramp, a sine of period 20 steps",
+                   maxdiff(period2_amplitude(x), ref), 1e-12)
+
+
+@check("31", "reversal share vs a loop counting sign changes; 1 for an alternating series, "
+       "0 for one of one sign, an exact zero counted as no reversal",
+       "pipeline.analysis.harm.reversal_share")
+def _reversal_share() -> Outcome:
+    from pipeline.analysis.harm import reversal_share
+
+    g = rng(31)
+    x = np.c_[g.standard_normal(300), (-1.0) ** np.arange(300), 1.0 + g.random(300)]
+    x[10, 0] = 0.0
+    ref = [sum(1 for k in range(299) if x[k, i] * x[k + 1, i] < 0) / 299 for i in range(3)]
+    diffs = [maxdiff(reversal_share(x), ref), abs(ref[1] - 1.0), abs(ref[2])]
+    return Outcome("300 samples: random signs with one exact zero, alternating, positive",
+                   max(diffs), 0.0)
+
+
+@check("32", "attitude jitter at the instants of θ_k = ωk dt + A(−1)^k about a random fixed "
+       "axis on top of a random attitude (reads A), and of a constant rate (reads 0)",
+       "pipeline.analysis.harm.attitude_jitter")
+def _attitude_jitter() -> Outcome:
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.analysis.harm import attitude_jitter
+
+    g = rng(32)
+    axis = g.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    R0 = Rotation.from_rotvec(g.standard_normal(3))
+    k = np.arange(200)
+    diffs = []
+    for A in (0.00225, 0.0):
+        theta = 0.0045 * k + A * (-1.0) ** k
+        quat = (R0 * Rotation.from_rotvec(theta[:, None] * axis)).as_quat()
+        diffs.append(maxdiff(attitude_jitter(quat), A))
+    return Outcome("200 steps at 0.0045 rad per step, A = 0.00225 rad and 0", max(diffs), 1e-12,
+                   "rad")
+
+
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
 # :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
@@ -74,4 +127,7 @@ CHECKS = (
     _projection,
     _abs_cos,
     _velocity_jumps,
+    _period2_amplitude,
+    _reversal_share,
+    _attitude_jitter,
 )

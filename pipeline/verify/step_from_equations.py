@@ -157,6 +157,10 @@ def expected_step(mission, s, h: float = 1e-6) -> tuple[dict, dict]:
     v_raw = Gi @ np.concatenate([v_c_new, vb_new])
     row["sat_v_max"] = bool(np.any(np.abs(v_raw) > lim.v_max))
     v_new = np.clip(v_raw, -lim.v_max, lim.v_max)
+    # The commanded force (eq. 29): the RNEA of the generalized acceleration of the commanded
+    # change of ν = [v_c; v̆]; the update of eq. 15 applies it as it is, at a constant rate.
+    nu_dot = (np.concatenate([v_c_new, vb_new]) - np.concatenate([s.v_c, vb])) / dt
+    u = pin.rnea(rob.model, rob.data, q, v, Gi @ (nu_dot - G_dot @ v)).copy()
 
     cam, tgt = spec.camera, mission.target  # eq. 18, from nothing seen
     r = tgt.points - p_e
@@ -171,7 +175,8 @@ def expected_step(mission, s, h: float = 1e-6) -> tuple[dict, dict]:
             "s_min_J": s_J[-1], "kappa_J": s_J[0] / s_J[-1], "gamma": gamma,
             "dt_mu_max": dt * mu.max(), "pointing_err_deg": _angle_deg(R_tb[:, 2], -p_b),
             "boresight_err_deg": _angle_deg(R_te[:, 2], ref.aim - p_e),
-            "com_err": np.linalg.norm(xc), "coverage": seen.mean()}
+            "com_err": np.linalg.norm(xc), "coverage": seen.mean(), "u_cmd": u,
+            "u_applied": u, "attitude_excursion_deg": 0.0}
     nxt = {"q": pin.integrate(rob.model, q, v_new * dt), "v": v_new, "v_c": v_c_new,
            "v_breve": vb_new, "tau": s.tau + gamma * dt, "integral": integral,
            "v_breve_des_prev": v_des}

@@ -1,0 +1,124 @@
+"""What the ripple does to the actuators and the bus attitude (eqs. 30–32).
+
+The pointing error of z_b cannot see a ripple about z_b, so the harm of a period-2 loop is
+judged on what it moves: the generalized force the plant receives (the log's ``u_applied``:
+the bus wrench [f_b; τ_b] in the bus frame, then the joint torques, eq. 29), the joint rates,
+and the bus attitude between two control instants. Every statistic is over the analysis
+window and reads the same for any dt where it measures a physical quantity (a torque in N·m,
+reversals per second).
+
+- period-2 amplitude of a series, a = RMS(Δ²x)/4 (eq. 30): an alternating a(−1)^k has
+  Δ²x = 4a(−1)^k; a smooth series, almost none;
+- reversal share, the fraction of consecutive steps whose values have opposite signs (eq. 31):
+  1 for a period-2 about zero, 0 for a series of one sign, ½ for a random sign; its rate
+  per second is share/dt;
+- bus attitude jitter (eq. 32): the period-2 amplitude of the attitude at the control
+  instants, ¼‖δ_k − δ_{k−1}‖ with δ_k = log(R_tb,kᵀ R_tb,k+1) the bus frame's rotation over
+  step k (an attitude θ_k = θ̄_k + A(−1)^k about a fixed axis reads A), plus its excursion
+  between them (the log's ``attitude_excursion_deg``: the largest angle from the geodesic
+  between two instants, which the plant measures). The reduced update (eq. 15) turns the bus
+  at a constant rate over a step, so its ripple sits at the instants; under a held torque
+  (eq. 29) the rate ramps and the instants fall on the oscillation's zero crossings, its
+  amplitude between them. The sum is the continuous attitude's period-2 amplitude in both
+  cases, and a bound on it otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+BUS_TORQUE_AXES = ("x_b", "y_b", "z_b")
+
+
+@dataclass(frozen=True)
+class ChannelHarm:
+    """One group of actuator channels (the bus torque's three axes, or the joints)."""
+
+    rms: float  # RMS over the window of the channels' norm
+    channel: str  # the channel of largest period-2 amplitude
+    period2_amplitude: float  # its a = RMS(Δ²x)/4 (eq. 30)
+    reversal_share: float  # its share of sign reversals between consecutive steps (eq. 31)
+    reversals_per_s: float  # reversal_share / dt
+
+
+@dataclass(frozen=True)
+class AttitudeHarm:
+    """The bus attitude's period-2 motion (eq. 32), degrees, RMS over the window."""
+
+    jitter_deg: float  # at the instants plus between them
+    jitter_deg_max: float
+    at_instants_deg: float
+    between_instants_deg: float
+    step_deg_median: float  # the median rotation of the bus over one step
+
+
+@dataclass(frozen=True)
+class Harm:
+    """The harm record of one run (eqs. 30–32), units in the field names' comments."""
+
+    bus_torque: ChannelHarm  # N·m, the plant's received τ_b (u_applied[3:6])
+    joint_torque: ChannelHarm  # N·m, the plant's received joint torques (u_applied[6:])
+    joint_rate: ChannelHarm  # rad/s, q̇ (v[6:])
+    attitude: AttitudeHarm
+
+
+def period2_amplitude(x: np.ndarray) -> np.ndarray:
+    """a = RMS(Δ²x)/4 along axis 0 (eq. 30)."""
+    return np.sqrt(np.mean(np.diff(np.asarray(x, dtype=float), 2, axis=0) ** 2, axis=0)) / 4
+
+
+def reversal_share(x: np.ndarray) -> np.ndarray:
+    """The share of k with x_k·x_{k+1} < 0, along axis 0 (eq. 31); an exact zero reverses
+    nothing."""
+    x = np.asarray(x, dtype=float)
+    return np.mean(x[:-1] * x[1:] < 0, axis=0)
+
+
+def channel_harm(x: np.ndarray, dt: float, names: tuple[str, ...]) -> ChannelHarm:
+    """The statistics of eqs. 30 and 31 of the N×k channels x, on the channel of largest
+    period-2 amplitude."""
+    amp = period2_amplitude(x)
+    i = int(np.argmax(amp))
+    share = float(reversal_share(x[:, i]))
+    return ChannelHarm(rms=float(np.sqrt(np.mean(np.sum(x * x, axis=1)))), channel=names[i],
+                       period2_amplitude=float(amp[i]), reversal_share=share,
+                       reversals_per_s=share / dt)
+
+
+def attitude_steps(quat_tb: np.ndarray) -> np.ndarray:
+    """δ_k = log(R_tb,kᵀ R_tb,k+1), the bus frame's rotation over each step, in the bus frame
+    (rad, (N−1)×3), from the logged unit quaternions (x, y, z, w) (eq. 32)."""
+    r = Rotation.from_quat(quat_tb)
+    return (r[:-1].inv() * r[1:]).as_rotvec()
+
+
+def attitude_jitter(quat_tb: np.ndarray) -> np.ndarray:
+    """The bus attitude's period-2 amplitude at each inner step, ¼‖δ_k − δ_{k−1}‖ (rad,
+    eq. 32)."""
+    return np.linalg.norm(np.diff(attitude_steps(quat_tb), axis=0), axis=1) / 4
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x * x)))
+
+
+def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.ndarray,
+         dt: float) -> Harm:
+    """The harm record of one run's window (eqs. 30–32): N rows of the log's ``u_applied``,
+    ``v``, ``q`` and ``attitude_excursion_deg``, N ≥ 3."""
+    n_joints = u_applied.shape[1] - 6
+    joints = tuple(f"joint {j + 1}" for j in range(n_joints))
+    at_instants = np.degrees(attitude_jitter(q[:, 3:7]))  # instants 1 … N−2
+    between = np.asarray(excursion_deg, dtype=float)
+    jitter = at_instants + between[1:-1]
+    steps = np.degrees(np.linalg.norm(attitude_steps(q[:, 3:7]), axis=1))
+    return Harm(bus_torque=channel_harm(u_applied[:, 3:6], dt, BUS_TORQUE_AXES),
+                joint_torque=channel_harm(u_applied[:, 6:], dt, joints),
+                joint_rate=channel_harm(v[:, 6:], dt, joints),
+                attitude=AttitudeHarm(jitter_deg=_rms(jitter), jitter_deg_max=float(jitter.max()),
+                                      at_instants_deg=_rms(at_instants),
+                                      between_instants_deg=_rms(between),
+                                      step_deg_median=float(np.median(steps))))
