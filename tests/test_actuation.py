@@ -138,3 +138,23 @@ def test_attitude_jitter_adds_the_instants_and_the_excursion():
     assert zig.between_instants_deg == 0.0 and zig.jitter_deg == zig.at_instants_deg
     both = harm(zeros, zeros, q, np.full(n, eps), 0.03).attitude
     assert both.jitter_deg == pytest.approx(np.degrees(A) + eps, rel=1e-9)
+
+
+@pytest.mark.parametrize(("name", "mode"), [
+    ("short_nominal", "bus yaw ω_b,z"),
+    ("short_servicer_nominal", "camera roll ω_e,z (about the boresight)")])
+def test_the_fastest_mode_is_named_along_the_whole_log(tmp_path, name, mode):
+    """The analysis names the fastest damping mode at steps over the whole log (eq. 21): the
+    seed robot's bus yaw, the servicer's camera roll, on every sampled step, with the largest
+    dt·μ_max equal to the guard's logged maximum at those steps."""
+    from pipeline.analysis.stages import fastest_modes_along
+    from pipeline.logs import read_columns
+    from pipeline.sim.robot import GiordanoRobot
+    from pipeline.sim.run import run_spec
+
+    spec = with_overrides(load_spec(name), {"mission.duration": 3.0})
+    path = run_spec(spec, tmp_path).path
+    got = fastest_modes_along(GiordanoRobot(spec), spec, path, samples=12)
+    assert got["share"] == {mode: 1.0} and got["samples"] == 12
+    logged = read_columns(path, ["dt_mu_max"])["dt_mu_max"]
+    assert got["dt_mu_max"] == pytest.approx(logged[got["step_of_max"]], rel=1e-9)

@@ -350,3 +350,50 @@ def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
     md = (out / "n6" / "mechanism.md").read_text()
     assert "## Robot card" in md and "predicted μ_bus = D_b / I_zz,bus" in md
     assert "note's update order" in md or "note's fully" in md
+
+
+def test_the_note_tables_cells_are_judged_by_the_claim_that_reads_them():
+    """A cell's judgement comes from the claim whose check reads our value against the note's
+    (threshold metric note:KEY.COLUMN), else a note-row claim reading it, else any; all of that
+    claim's checks of the value make the tolerance. Round-off rows give no difference, and
+    the open claims' reasons say where the missions differ."""
+    from pipeline.claims.seed_note import NOTE_FILE, differences, load_note, note_table
+
+    note = load_note(NOTE_FILE)
+    rec = {"dominant": {"lag1": -0.999}, "theory": {"dt_mu_max": 3.84, "s_min_G": 0.096},
+           "provenance": {"max_abs_s_min_G": 2.2e-16}}
+    other = {"dominant": {"lag1": 0.9994}, "theory": {"dt_mu_max": 1.28},
+             "provenance": {"max_abs_s_min_G": 0.0}}
+
+    def chk(metric, op, thr, ok, tm=None, rel_tol=None):
+        return {"metric": metric, "op": op, "threshold": thr, "ok": ok,
+                "threshold_metric": tm, "rel_tol": rel_tol}
+
+    claims = [
+        {"id": "C3", "kind": "identity", "status": "PASS", "expect": "hold",
+         "checks": [chk("nominal:theory.dt_mu_max", "gt", 2, True)]},
+        {"id": "C17", "kind": "identity", "status": "PASS", "expect": "hold",
+         "checks": [chk("nominal:theory.dt_mu_max", "close", 3.84, True,
+                        "note:dt_mu_max.nominal", 0.02)]},
+        {"id": "C1", "kind": "physics", "status": "PASS", "expect": "hold",
+         "checks": [chk("nominal:dominant.lag1", "lt", -0.5, True)]},
+        {"id": "C24", "kind": "note", "status": "PASS", "expect": "hold",
+         "checks": [chk("nominal:dominant.lag1", "lt", -0.9, True)]},
+        {"id": "C7", "kind": "software", "status": "PASS", "expect": "hold",
+         "checks": [chk("nominal:provenance.max_abs_s_min_G", "le", 1e-12, True)]},
+        {"id": "C25", "kind": "note", "status": "OPEN", "expect": "open", "reason": "q̄ moved.",
+         "checks": [chk("nominal:theory.s_min_G", "gt", 0.01, True),
+                    chk("nominal:theory.s_min_G", "lt", 0.05, False)]},
+    ]
+    rows = {r.key: r for r in note_table(note, {"nominal": rec, "dt010": other}, claims)}
+    dt_mu = rows["dt_mu_max"].cells[0]
+    assert (dt_mu.judgement.claim, dt_mu.judgement.tolerance, dt_mu.verdict) == (
+        "C17", "within 2 %", "agrees")  # against the note's value, not C3's > 2
+    assert rows["dominant_lag1"].cells[0].judgement.claim == "C24"  # the note row, not C1
+    s_min = rows["s_min_G"].cells[0]
+    assert (s_min.judgement.tolerance, s_min.verdict) == ("> 0.01 and < 0.05", "differs")
+    prov = rows["provenance"].cells[0]
+    assert prov.rel_diff is None and prov.verdict == "round-off"
+    assert rows["abs_cos"].cells[0].verdict == "no number"
+    assert rows["dt_mu_max"].cells[1].verdict == "not judged"  # no claim reads dt010's here
+    assert differences(list(rows.values())) == [("C25", rows["s_min_G"].row, "q̄ moved.")]
