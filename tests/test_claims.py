@@ -310,6 +310,7 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "sampled": "short_omega_ripple_sampled",
         "sampled_dt010": "short_omega_ripple_sampled_dt010",
         "sampled_delay_dt010": "short_omega_ripple_sampled_delay_dt010",
+        "sampled_delay": "short_omega_ripple_sampled_delay",
         "sampled_torque": "short_omega_ripple_sampled_torque"}
     assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
                                                         for n, r in full.runs.items()}

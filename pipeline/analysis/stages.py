@@ -337,6 +337,11 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
             "gain": fixes.gain, "dt_stable": fixes.dt_stable, "dt_margin": fixes.dt_margin,
             "gain_stable": fixes.gain_stable, "gain_margin": fixes.gain_margin},
         "integrator": integ, "dt": dt,
+        # The plant's computation delay (eq. 29): the map above has none; with one step the
+        # fastest mode's characteristic equation is z² − z + dt·μ_max = 0 (eq. 24).
+        "delay_steps": spec.mission.plant.delay_steps,
+        "delayed": (theory.delayed_mode(float(dt * mu[-1]))
+                    if spec.mission.plant.delay_steps and integ == "explicit" else None),
         "M_breve": M_b.tolist(), "D_breve": D.tolist(), "K_breve": K.tolist(),
         "J_x": J_x.tolist(), "K_x": K_x.tolist(),
     }
@@ -376,13 +381,15 @@ def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> dict:
 
 
 def prediction(theory_record: dict, lag1: float) -> dict:
-    """Does the theory's prediction agree with the data (eqs. 22, 25)? Predicted period-2:
+    """Does the theory's prediction agree with the data (eqs. 22, 24, 25)? Predicted period-2:
     the map Φ of the run's integrator has a dominant eigenvalue that is real, negative and
-    outside the unit circle. Measured period-2: the dominant direction's lag-1 is negative.
-    NaN agrees with nothing."""
+    outside the unit circle, and the plant applies the command without delay (with one step
+    of it the fastest mode's roots of z² − z + dt·μ = 0 are never real and negative).
+    Measured period-2: the dominant direction's lag-1 is negative. NaN agrees with nothing."""
     eig = theory_record["eig_dominant"]
     predicted = bool(eig["real"] < 0 and abs(eig["imag"]) <= 1e-9 * abs(eig["real"])
-                     and theory_record["spectral_radius"] > 1)
+                     and theory_record["spectral_radius"] > 1
+                     and not theory_record.get("delayed"))
     measured = bool(lag1 < 0)
     return {"period2_predicted": predicted, "period2_measured": measured,
             "agrees": bool(np.isfinite(lag1) and predicted == measured)}
