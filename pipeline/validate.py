@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
+from pipeline.sim.robot_file import RobotCard
 from pipeline.sim.stability import DampingMode, ModeFixes
 from pipeline.spec import Spec, load_spec
 
@@ -23,15 +24,19 @@ GAIN_UNITS = {"bus": "N·m·s/rad", "cam_pos": "N·s/m", "cam_ori": "N·m·s/rad
 @dataclass(frozen=True)
 class Validation:
     """What ``validate`` found: the resolved spec, its cost, every damping mode at the start
-    and the fixes of the fastest, and the bus-yaw mode's closed form."""
+    and the fixes of the fastest, and the robot card's closed forms (bus yaw, camera roll)."""
 
     spec: Spec
     estimate: Estimate
     budget: Budget
     log_bytes: int  # the log's rows before Parquet's compression (an upper bound on disk)
-    mu_bus: float  # 1/s, D_b / I_zz,bus of the spec's robot (eq. 21)
+    card: RobotCard  # at q̄, with the spec's gains: μ_bus = D_b/I_zz,bus, μ_roll = D_o/I_roll
     modes: list[DampingMode]  # of M̆⁻¹D̆ at the start state, fastest first (eq. 21)
     fixes: ModeFixes  # of the fastest (eq. 24)
+
+    @property
+    def mu_bus(self) -> float:
+        return self.card.mu_bus
 
     @property
     def dt_mu_bus(self) -> float:
@@ -41,7 +46,7 @@ class Validation:
 def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validation:
     """Load and check ``spec_arg`` as ``run`` would, without simulating; SpecError (exit 2)
     naming the field or file when ``run`` would refuse it."""
-    from pipeline.sim.robot_file import load_robot_model, robot_card
+    from pipeline.sim.robot_file import load_robot_model
 
     spec = load_spec(spec_arg)
     model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
@@ -50,7 +55,6 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
 
     q = pin.neutral(model)
     q[7:] = spec.robot.q_bar
-    card = robot_card(model, q, spec.controller.gains.bus.D)
     budget = budget or Budget.from_environment()
     est = check_mission(spec, budget, str(spec_arg))
     from pipeline.sim.mission import Mission
@@ -58,7 +62,7 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
 
     mission = Mission(spec)
     M, D, _, _ = mission.linearised_loop(mission.initial_state())
-    return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, card.mu_bus,
+    return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, mission.robot.card(q),
                       damping_modes(M, D), mode_fixes(M, D, spec.mission.dt))
 
 
@@ -91,9 +95,15 @@ def report_lines(v: Validation) -> list[str]:
     integ = s.controller.integrator
     stable = ("explicit: stable in this mode only below 2" if integ == "explicit"
               else "imex: the damping is implicit, no step bound")
+    c = v.card
     return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
             f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
-            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable})"]
+            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable})",
+            f"  camera-roll damping mode (closed form): μ_roll = D_o/I_roll = {c.mu_roll:.4g} "
+            f"1/s, dt·μ_roll = {m.dt * c.mu_roll:.3g} (I_roll = {c.I_roll:.4g} kg·m² about the "
+            f"last joint's axis; its CoM {c.roll_axis_offset:.2g} m and the camera "
+            f"{c.roll_camera_offset:.2g} m from the axis, boresight |cos| "
+            f"{c.roll_boresight_cos:.6f}: exact when both offsets are 0 and |cos| = 1)"]
 
 
 def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:

@@ -158,3 +158,24 @@ def test_the_fastest_mode_is_named_along_the_whole_log(tmp_path, name, mode):
     assert got["share"] == {mode: 1.0} and got["samples"] == 12
     logged = read_columns(path, ["dt_mu_max"])["dt_mu_max"]
     assert got["dt_mu_max"] == pytest.approx(logged[got["step_of_max"]], rel=1e-9)
+
+
+@pytest.mark.parametrize(("name", "rel"), [("nominal", 1e-6), ("servicer_nominal", 1e-12)])
+def test_the_camera_rolls_closed_form_is_the_reduced_inertias_mode(name, rel):
+    """μ_roll = D_o/I_roll from the robot card (the last joint's body about its axis, eq. 21)
+    against the camera-roll eigenpair of M̆⁻¹D̆ at the start (Γ⁻ᵀMΓ⁻¹ from CRBA): equal to
+    1e-15 on the servicer (CoM and camera on the axis), 4e-7 on the seed robot (its payload's
+    CoM 1.5e-5 m off it)."""
+    from pipeline.sim.base_controller import block_gains
+    from pipeline.sim.robot import GiordanoRobot
+    from pipeline.sim.stability import damping_modes
+
+    spec = load_spec(name)
+    robot = GiordanoRobot(spec)
+    q = robot.start_configuration()
+    card = robot.card(q)
+    _, D = block_gains(spec.controller, 1.0)
+    modes = damping_modes(robot.terms(q, np.zeros(robot.model.nv)).reduced_inertia, D)
+    roll = next(m for m in modes if m.axis == 8)
+    assert card.mu_roll == pytest.approx(roll.mu, rel=rel)
+    assert card.roll_boresight_cos == pytest.approx(1.0, abs=1e-6)

@@ -101,8 +101,10 @@ class GiordanoRobot:
                 d.oMf[fid].translation, d.Ag, d.dAg)
 
     def card(self, q: np.ndarray) -> RobotCard:
-        """The robot card at configuration q, with the spec's bus damping gain (eq. 21)."""
-        return robot_card(self.model, q, self.spec.controller.gains.bus.D)
+        """The robot card at configuration q, with the spec's bus and camera orientation
+        damping gains (eq. 21)."""
+        gains = self.spec.controller.gains
+        return robot_card(self.model, q, gains.bus.D, gains.cam_ori.D, self.frame_id)
 
     # -- configurations -------------------------------------------------------------------
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:

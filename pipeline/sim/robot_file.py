@@ -67,8 +67,9 @@ def load_robot_model(path: Path | str, camera_frame: str,
 
 @dataclass(frozen=True)
 class RobotCard:
-    """The loaded model as the code sees it: masses, CoM, the bus rigid body's inertia and
-    the bus-yaw damping rate it predicts (eqs. 21, 24)."""
+    """The loaded model as the code sees it: masses, CoM, the bus rigid body's inertia, and
+    the two damping rates it predicts in closed form (eqs. 21, 24): the bus yaw's and the
+    camera roll's."""
 
     total_mass: float  # kg
     com_b: list[float]  # whole-robot CoM in the bus frame at the start configuration, m
@@ -81,37 +82,78 @@ class RobotCard:
     D_b: float  # bus damping gain, N·m·s/rad
     mu_bus: float  # D_b / I_zz,bus, 1/s
     dt_star_bus: float  # 2 / mu_bus, s
+    # The camera roll about the last arm joint's axis: the bodies it carries (the wrist link
+    # and the payload, one inertia in the model) and the camera frame's alignment with it.
+    roll_axis_offset: float = 0.0  # distance of that inertia's CoM from the axis, m
+    roll_boresight_cos: float = 0.0  # |cos| of the camera z-axis against the axis
+    roll_camera_offset: float = 0.0  # distance of the camera origin from the axis, m
+    I_roll: float = 0.0  # that inertia about the axis, kg·m²
+    D_o: float = 0.0  # camera orientation damping gain, N·m·s/rad
+    mu_roll: float = 0.0  # D_o / I_roll, 1/s
+    dt_star_roll: float = 0.0  # 2 / mu_roll, s
 
 
-def robot_card(model: pin.Model, q: np.ndarray, D_b: float) -> RobotCard:
-    """The card of ``model`` at configuration q with bus damping gain D_b.
+def _joint_axis(model: pin.Model, j: int) -> np.ndarray:
+    """The unit axis of revolute joint j in its own frame."""
+    joint = model.joints[j]
+    local = {"JointModelRX": [1, 0, 0], "JointModelRY": [0, 1, 0], "JointModelRZ": [0, 0, 1]}
+    name = joint.shortname()
+    # JointModelRevoluteUnaligned carries its axis; the aligned ones name it.
+    axis = np.array(local[name] if name in local else joint.axis, dtype=float)
+    return axis / np.linalg.norm(axis)
+
+
+def _inertia_about(inertia: pin.Inertia, axis: np.ndarray, point: np.ndarray
+                   ) -> tuple[float, float]:
+    """(âᵀ I_c â + m d², d): a rigid body's inertia about the line through ``point`` along
+    ``axis`` (unit), and the distance d of its CoM from that line."""
+    r = inertia.lever - point
+    d = float(np.linalg.norm(r - axis * (axis @ r)))
+    return float(axis @ inertia.inertia @ axis + inertia.mass * d**2), d
+
+
+def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
+               camera_frame: int | None = None) -> RobotCard:
+    """The card of ``model`` at configuration q with bus damping gain D_b and camera
+    orientation damping gain D_o (eq. 21).
 
     I_zz,bus = âᵀ I_c â + m d², â the first arm joint's axis and d the distance of the bus
     body's CoM from it. When d = 0 the bus yaw about â moves nothing else at a fixed camera
     pose and CoM, so it is an eigen-direction of M̆ with inertia I_zz,bus, and its damping
-    rate is μ_bus = D_b / I_zz,bus (eq. 21).
+    rate is μ_bus = D_b / I_zz,bus.
+
+    I_roll, likewise, is the last arm joint's body (the wrist link with the payload fixed to
+    it) about that joint's axis. When its CoM is on the axis and the camera's z-axis (the
+    boresight) runs along it, the camera roll about the boresight turns that body alone at
+    a fixed bus, camera position and CoM: an eigen-direction of M̆ with inertia I_roll, and
+    μ_roll = D_o / I_roll. The card gives the offsets and the alignment, so a reader sees
+    when the closed form applies.
     """
     data = model.createData()
     com = pin.centerOfMass(model, data, q)
     bus = model.inertias[1]
-    pan = model.joints[2]
     placement = model.jointPlacements[2]
-    # The arm's first joint: a revolute joint about a known local axis of its placement.
-    S = pan.shortname()
-    local = {"JointModelRX": [1, 0, 0], "JointModelRY": [0, 1, 0], "JointModelRZ": [0, 0, 1]}
-    if S in local:
-        axis = placement.rotation @ np.array(local[S], dtype=float)
-    else:  # JointModelRevoluteUnaligned
-        axis = placement.rotation @ np.asarray(pan.axis, dtype=float)
-    axis /= np.linalg.norm(axis)
-    r = bus.lever - placement.translation
-    offset = float(np.linalg.norm(r - axis * (axis @ r)))
-    I_axis = float(axis @ bus.inertia @ axis + bus.mass * offset**2)
+    axis = placement.rotation @ _joint_axis(model, 2)
+    I_axis, offset = _inertia_about(bus, axis, placement.translation)
     R_tb = data.oMi[1].rotation
     mu = D_b / I_axis
+    last = model.njoints - 1
+    roll_axis = _joint_axis(model, last)
+    I_roll, roll_offset = _inertia_about(model.inertias[last], roll_axis, np.zeros(3))
+    cos, cam_offset = 0.0, float("nan")
+    if camera_frame is not None:
+        pin.updateFramePlacements(model, data)
+        oMj, oMf = data.oMi[last], data.oMf[camera_frame]
+        axis_t = oMj.rotation @ roll_axis
+        cos = float(abs(axis_t @ oMf.rotation[:, 2]))
+        cam_offset = float(np.linalg.norm(np.cross(oMf.translation - oMj.translation, axis_t)))
+    mu_roll = D_o / I_roll
     return RobotCard(
         total_mass=float(sum(i.mass for i in model.inertias)),
         com_b=(R_tb.T @ (com - data.oMi[1].translation)).tolist(),
         bus_mass=float(bus.mass), bus_com_b=bus.lever.tolist(),
         bus_inertia=bus.inertia.tolist(), pan_axis_b=axis.tolist(), pan_axis_offset=offset,
-        I_zz_bus=I_axis, D_b=float(D_b), mu_bus=mu, dt_star_bus=2.0 / mu)
+        I_zz_bus=I_axis, D_b=float(D_b), mu_bus=mu, dt_star_bus=2.0 / mu,
+        roll_axis_offset=roll_offset, roll_boresight_cos=cos, roll_camera_offset=cam_offset,
+        I_roll=I_roll, D_o=float(D_o), mu_roll=mu_roll,
+        dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"))
