@@ -42,6 +42,7 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis import signals
 from pipeline.analysis.stages import Window, rebuild_and_project
+from pipeline.artefact_paths import log_path
 from pipeline.bench_linalg import linalg_costs, linalg_markdown
 from pipeline.bench_linalg import summary as _stats
 from pipeline.logs import atomic_write_text, file_metadata
@@ -208,7 +209,7 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         n_mem = 10000 if quick else 100000
         long = run_spec(with_overrides(spec, {"mission.duration": n_mem * spec.mission.dt},
                                        name="bench_long"), tmp / "logs").path
-        big = tiled_log(long, tmp / "big" / "bench_long" / "run.parquet", 10)
+        big = tiled_log(long, log_path(tmp / "big", "bench_long"), 10)
         memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
                   f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
     _progress(f"the step's linear algebra against BLAS and LAPACK, {repeats} repeats")

@@ -10,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from pipeline.artefact_paths import analysis_path
 from pipeline.errors import PipelineError, RunFailed
 
 
@@ -59,7 +60,7 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
     if a.window_start is None and not a.force:
         log = verify_log(a.log)
         other = verify_log(a.against) if a.against else None
-        path = Path(a.out) / log.spec.name / "analysis.json"
+        path = analysis_path(a.out, log.spec.name)
         if current_analysis(path, log.path, log.meta,
                             None if other is None else (other.path, other.meta)):
             print(f"{log.spec.name}: up to date (same log and analysis code) -> "

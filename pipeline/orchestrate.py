@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
+from pipeline.artefact_paths import analysis_path
 from pipeline.errors import RunFailed
 from pipeline.logs import LogMeta, verify_log
 from pipeline.paths import display_path
@@ -67,7 +68,7 @@ def ensure_run(spec: Spec, logs_dir: Path, expect: str = "complete") -> RunRecor
 def ensure_analysis(run: RunRecord, out_dir: Path, against: RunRecord | None = None,
                     against_record: dict | None = None) -> dict:
     """The analysis record of ``run`` (compared with ``against``), reused or recomputed."""
-    path = Path(out_dir) / run.spec.name / "analysis.json"
+    path = analysis_path(out_dir, run.spec.name)
     old = current_analysis(path, run.path, run.meta,
                            None if against is None else (against.path, against.meta))
     if old is not None:

@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.artefact_paths import ANALYSIS_FILE, DIRECTIONS_FILE
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, atomic_write_text
 
@@ -27,8 +28,8 @@ from pipeline.logs import atomic_write_bytes, atomic_write_text
 # /4: harm (the actuators' torque reversals and the bus attitude jitter, eqs. 30–32) and
 # modes_along (the fastest damping mode named along the whole log, eq. 21).
 SCHEMA = "breve-analysis/4"
-RECORD_NAME = "analysis.json"
-TABLE_NAME = "directions.parquet"
+RECORD_NAME = ANALYSIS_FILE
+TABLE_NAME = DIRECTIONS_FILE
 # The stages every record of a complete log holds, and those of a diverged log's record.
 STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version", "analysis_version",
           "integrator", "dt", "n_steps", "window", "provenance", "directions", "dominant",

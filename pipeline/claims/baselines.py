@@ -27,6 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.artefact_paths import log_path
 from pipeline.claims.tolerances import load_tolerances, measure, write_tolerances
 from pipeline.errors import CheckFailed, PipelineError
 from pipeline.logs import LogError, atomic_write_bytes, atomic_write_text, read_meta
@@ -160,7 +161,7 @@ def check(out_dir: Path = REPORTS, pinned_dir: Path | None = None) -> dict:
         for name in tqdm(baseline_names(), disable=not interactive(), unit="log",
                          desc="baselines", file=sys.stderr, leave=False):
             fresh, spec_hash = _run_fresh(name, Path(tmp))
-            pinned = Path(pinned_dir) / name / "run.parquet"
+            pinned = log_path(pinned_dir, name)
             entry = {"pinned": display_path(pinned), "spec_hash": spec_hash}
             if not pinned.is_file():
                 entry |= {"max_abs_diff": float("inf"), "worst_column": "",
@@ -253,7 +254,7 @@ def repin(pinned_dir: Path | None = None) -> list[str]:
     with tempfile.TemporaryDirectory(prefix="baselines-") as tmp:
         for name in names:
             fresh, spec_hash = _run_fresh(name, Path(tmp))
-            pinned = Path(pinned_dir) / name / "run.parquet"
+            pinned = log_path(pinned_dir, name)
             if not pinned.is_file():
                 changes.append(f"{name}: newly pinned")
             else:

@@ -18,6 +18,7 @@ import numpy as np
 
 from pipeline.analysis.record import RECORD_NAME
 from pipeline.analysis.signals import lag1_autocorrelation
+from pipeline.artefact_paths import log_path
 from pipeline.claims.record import read_claims_json, write_claims_json
 from pipeline.claims.register import (
     LOG_GROUPS,
@@ -172,7 +173,7 @@ class Context:
             self._baselines = ensure_report(self.out)
             tolerances = [PINNED / TOLERANCES] if (PINNED / TOLERANCES).is_file() else []
             self.files += [self.out / "baselines.json", *tolerances,
-                           *(PINNED / n / "run.parquet" for n in baseline_names())]
+                           *(log_path(PINNED, n) for n in baseline_names())]
         return self._baselines
 
     def start_sweeps(self) -> None:

@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pipeline.artefact_paths import CLAIMS_FILE
 from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, ClaimsFile
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
     from pipeline.claims.evaluate import ClaimEval
 
 STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
-RECORD_NAME = "claims.json"
+RECORD_NAME = CLAIMS_FILE
 
 
 def _jsonable(x: Any) -> Any:

@@ -14,6 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from pipeline.analysis.record import try_read_analysis
+from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, DIRECTIONS_FILE, log_path
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, num_rows, read_meta
 from pipeline.platform import platform_key
@@ -110,7 +111,7 @@ def current_baselines(path: Path, names: list[str], pinned_dir: Path,
         old = json.loads(Path(path).read_text())
         ok = (old["sim_version"] == sim_version() and sorted(old["baselines"]) == names
               and old["platform_key"] == platform_key() and old["tolerances_sha256"] == tol
-              and all(file_digest(Path(pinned_dir) / n / "run.parquet")
+              and all(file_digest(log_path(pinned_dir, n))
                       == old["baselines"][n].get("pinned_sha256") for n in names))
     except (OSError, KeyError, json.JSONDecodeError, TypeError, AttributeError):
         return None
@@ -120,7 +121,7 @@ def current_baselines(path: Path, names: list[str], pinned_dir: Path,
 def report_inputs(out: Path) -> list[Path]:
     """The files the reports under ``out`` are rendered from (not the reports themselves)."""
     out = Path(out)
-    patterns = ("*/analysis.json", "*/directions.parquet", "claims.json", "bench.json",
+    patterns = (f"*/{ANALYSIS_FILE}", f"*/{DIRECTIONS_FILE}", CLAIMS_FILE, "bench.json",
                 "baselines.json", "sweeps/*/sweep.parquet")
     return sorted(p for pat in patterns for p in out.glob(pat))
 

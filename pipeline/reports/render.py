@@ -19,6 +19,7 @@ from functools import partial
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
+from pipeline.artefact_paths import CLAIMS_FILE
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text, read_meta
@@ -212,7 +213,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
         return []
     key = report_key(out)  # before rendering: the inputs this rendering reads
     runs = load_runs(out)
-    claims = read_claims_json(out / "claims.json")
+    claims = read_claims_json(out / CLAIMS_FILE)
     sweep_tables = list(out.glob("sweeps/*/sweep.parquet"))
     if not runs and claims is None and not sweep_tables:
         raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json or "
@@ -243,7 +244,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     for m in mechanisms:
         m["eig"] = f"figures/eig_{m['run'].folder}.png" in fig_files
     _remove_stale(out, {*written, *(out / f.file for f in figs)})
-    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", "claims.json", "baselines.md",
+    pages = _existing(out, "CLAIMS.html", "CLAIMS.md", CLAIMS_FILE, "baselines.md",
                       "baselines.json", "bench.md", "bench.json", "ci/CLAIMS.html",
                       "ci/CLAIMS.md", "ci/claims.json")
     sweeps = sweep_files(out)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from pipeline import artefact_paths
 from pipeline.budget import check_mission
 from pipeline.errors import RunFailed
 from pipeline.logs import (
@@ -30,7 +31,7 @@ class RunOutcome:
 
 
 def log_path(spec: Spec, out_dir: Path) -> Path:
-    return Path(out_dir) / spec.name / "run.parquet"
+    return artefact_paths.log_path(out_dir, spec.name)
 
 
 def run_spec(spec: Spec, out_dir: Path | str = "logs", progress: bool = False,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pipeline.artefact_paths import log_path
 from pipeline.budget import Budget, check_mission, check_sweep_size, check_sweep_time
 from pipeline.errors import OutputError, PipelineError, RunFailed
 from pipeline.provenance.keys import analysis_version, sim_version
@@ -212,7 +213,7 @@ def _raise_stop(signum, _frame):
 
 
 def _finished_points(sweep: Sweep) -> int:
-    return sum((sweep.log_dir / p.name / "run.parquet").is_file() for p in sweep.points)
+    return sum(log_path(sweep.log_dir, p.name).is_file() for p in sweep.points)
 
 
 def sweep_command(args: argparse.Namespace) -> int:

@@ -28,14 +28,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+from pipeline.artefact_paths import ANALYSIS_FILE, LOG_FILE
 from pipeline.errors import PipelineError
 from pipeline.logs import num_rows, read_meta
 from pipeline.provenance.validity import current_analysis, current_log
 from pipeline.spec import Spec
 
 LOCK_NAME = ".lock"
-LOG_NAME = "run.parquet"
-ANALYSIS_NAME = "analysis.json"
 
 # record column → path in analysis.json
 FIGURES: dict[str, tuple[str, ...]] = {
@@ -157,7 +156,7 @@ def run_point(spec: Spec, root: str) -> dict:
 
     t0 = time.perf_counter()
     folder = Path(root) / spec.name
-    log, analysis_path = folder / LOG_NAME, folder / ANALYSIS_NAME
+    log, analysis_path = folder / LOG_FILE, folder / ANALYSIS_FILE
     ran = analysed = False
     error = ""
     analysis = None
