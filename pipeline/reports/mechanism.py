@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.analysis.stages import dig
 from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
 from pipeline.reports.templating import num
@@ -95,18 +96,12 @@ HARM_ROWS = (
 )
 
 
-def _dig(rec: dict, path: tuple[str, ...]):
-    for key in path:
-        rec = rec[key]
-    return rec
-
-
 def harm_table(rec: dict, other: dict) -> list[dict]:
     """Section 7's rows for the pair: each quantity of ``HARM_ROWS``, formatted, with the
     channel it was measured on."""
     def cell(r: dict, path, channel) -> str:
-        value = num(_dig(r, path))
-        return f"{value} ({_dig(r, channel)})" if channel else value
+        value = num(dig(r, path))
+        return f"{value} ({dig(r, channel)})" if channel else value
 
     return [{"quantity": f"{label} ({unit})" if unit else label,
              "a": cell(rec, path, channel), "b": cell(other, path, channel)}
