@@ -50,6 +50,7 @@ from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
 from pipeline.spec import Spec, canonical_hash, load_spec, with_overrides
+from pipeline.store.door import ArtefactStore
 from pipeline.sweep.throughput import sweep_throughput
 
 
@@ -78,9 +79,10 @@ def sim_once(spec: Spec) -> float:
 
 def analysis_once(robot: GiordanoRobot, path: Path) -> float:
     """Per-step cost (µs) of stages 1–3 on a log: Γ rebuild, per-direction SVD, lag-1."""
-    n = pq.ParquetFile(path).metadata.num_rows
+    log = ArtefactStore().open_log(path)  # verified before the clock starts
+    n = log.rows
     t0 = time.perf_counter()
-    _, y, _ = rebuild_and_project(robot, path, Window(n // 2, n, "bench"))
+    _, y, _ = rebuild_and_project(robot, log, Window(n // 2, n, "bench"))
     signals.lag1_autocorrelation(y)
     signals.step_rms(y)
     return (time.perf_counter() - t0) / n * 1e6

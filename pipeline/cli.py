@@ -10,8 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pipeline.artefact_paths import analysis_path
-from pipeline.errors import PipelineError, RunFailed
+from pipeline.errors import PipelineError
 
 
 def _cmd_validate(a: argparse.Namespace) -> int:
@@ -22,58 +21,49 @@ def _cmd_validate(a: argparse.Namespace) -> int:
 
 def _cmd_run(a: argparse.Namespace) -> int:
     from pipeline.paths import display_path
-    from pipeline.progress import interactive, stage
-    from pipeline.provenance.validity import current_log
     from pipeline.sim.robot_file import load_robot_model
-    from pipeline.sim.run import log_path, run_spec
     from pipeline.spec import load_spec
+    from pipeline.store.door import ArtefactStore
 
     # Every spec and its robot file checked before anything runs or prints: bad input is
     # one line (exit 2), not a stage that started and failed.
     specs = [load_spec(s) for s in a.spec]
     for spec in specs:
         load_robot_model(spec.robot_path, spec.robot.camera_frame, spec.robot.bus_inertia_scale)
+    store = ArtefactStore(a.out)
     for spec in specs:
-        path = log_path(spec, Path(a.out))
-        meta = None if a.force else current_log(path, spec)
-        if meta is not None:
-            print(f"{spec.name}: up to date ({meta.status}, same spec, robot and simulator) "
-                  f"-> {display_path(path)}")
-            if meta.status != "complete":  # the same outcome as running it again
-                raise RunFailed(f"{spec.name}: run {meta.status} at {meta.error}; log marked "
-                                f"{meta.status}: {display_path(path)}")
-            continue
-        with stage(f"mission {spec.name}", f"({spec.n_steps} steps) -> {display_path(path)}"):
-            out = run_spec(spec, a.out, progress=interactive())
-        for w in out.warnings:
-            print(f"warning: {w}", file=sys.stderr)
-        print(f"{spec.name}: {out.n_steps} steps, {out.status} -> {display_path(out.path)}")
+        # A stored run that failed fails again, unrun: the simulation is deterministic.
+        run = store.run(spec, expect="complete", force=a.force)
+        if run.reused:
+            print(f"{spec.name}: up to date (complete, same spec, robot and simulator) "
+                  f"-> {display_path(run.path)}")
+        else:
+            print(f"{spec.name}: {run.log.rows} steps, complete -> {display_path(run.path)}")
     return 0
 
 
 def _cmd_analyze(a: argparse.Namespace) -> int:
-    from pipeline.analysis.cli import analyze_command
-    from pipeline.logs import verify_log
+    from pipeline.analysis.summary import summary_lines
     from pipeline.paths import display_path
-    from pipeline.provenance.validity import current_analysis
+    from pipeline.store.door import ArtefactStore
 
-    if a.window_start is None and not a.force:
-        log = verify_log(a.log)
-        other = verify_log(a.against) if a.against else None
-        path = analysis_path(a.out, log.spec.name)
-        if current_analysis(path, log.path, log.meta,
-                            None if other is None else (other.path, other.meta)):
-            print(f"{log.spec.name}: up to date (same log and analysis code) -> "
-                  f"{display_path(path)}")
-            return 0
-    return analyze_command(Path(a.log), Path(a.against) if a.against else None, Path(a.out),
-                           a.window_start)
+    store = ArtefactStore(out=a.out)
+    log = store.open_log(a.log)
+    other = store.open_log(a.against) if a.against else None
+    done = store.analysis(log, other, a.window_start, force=a.force, quiet=True)
+    if done.reused:
+        print(f"{log.spec.name}: up to date (same log and analysis code) -> "
+              f"{display_path(done.path)}")
+        return 0
+    for line in summary_lines(done.record, done.path):
+        print(line)
+    return 0
 
 
 def _report(out: Path, force: bool = False, cross_check=None) -> int:
     """The report stage; ``cross_check``: a CrossCheck this process already built."""
     from pipeline.progress import stage
-    from pipeline.provenance.validity import REPORT_KEY_FILE, current_report
+    from pipeline.store.validity import REPORT_KEY_FILE, current_report
 
     # Current reports are said so before the renderer (matplotlib, the figures) is imported:
     # the second `make all` should take seconds.
@@ -107,8 +97,8 @@ def _claims(claims: str, out: Path, force: bool = False):
     from pipeline.logs import atomic_write_text
     from pipeline.paths import display_path
     from pipeline.progress import say, stage
-    from pipeline.provenance.validity import CLAIMS_KEY_FILE, claims_key, current_claims
     from pipeline.spec import resolve_spec_path
+    from pipeline.store.validity import CLAIMS_KEY_FILE, claims_key, current_claims
 
     stamp, page = out / CLAIMS_KEY_FILE, out / "CLAIMS.md"
     cf = load_claims(resolve_spec_path(claims))  # a bad register is one line, before any stage

@@ -8,11 +8,12 @@ same folder, fsynced, then renamed over the target.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -206,12 +207,13 @@ def log_metadata(meta: LogMeta) -> dict[str, str]:
     }
 
 
-def _open(path: Path) -> pq.ParquetFile:
+def _open(path: Path, handle=None) -> pq.ParquetFile:
+    """The Parquet file at ``path`` (read through ``handle`` when one is open on it)."""
     path = Path(path)
-    if not path.is_file():
+    if handle is None and not path.is_file():
         raise LogError(f"{path}: log file not found")
     try:
-        return pq.ParquetFile(path)
+        return pq.ParquetFile(path if handle is None else handle)
     except (pa.ArrowInvalid, OSError) as exc:
         raise LogError(f"{path}: not a readable Parquet log ({str(exc).splitlines()[0]})") from None
 
@@ -219,13 +221,21 @@ def _open(path: Path) -> pq.ParquetFile:
 def file_metadata(path: Path) -> dict[str, str]:
     """The key-value metadata of a Parquet file's footer (where :class:`LogWriter` puts the
     keys it learns at the end of a run), without Arrow's own schema key."""
-    md = _open(path).metadata.metadata or {}
+    return _footer(_open(path))
+
+
+def _footer(pf: pq.ParquetFile) -> dict[str, str]:
+    md = pf.metadata.metadata or {}
     return {k.decode(): v.decode() for k, v in md.items() if k != b"ARROW:schema"}
 
 
 def read_meta(path: Path) -> LogMeta:
     """The log's metadata; a missing key is a LogError naming it."""
-    md = file_metadata(path)
+    return _meta(Path(path), _open(path))
+
+
+def _meta(path: Path, pf: pq.ParquetFile) -> LogMeta:
+    md = _footer(pf)
     for key in META_KEYS:
         if f"pipeline.{key}" not in md:
             raise LogError(f"{path}: metadata key pipeline.{key} missing")
@@ -267,6 +277,12 @@ def num_rows(path: Path) -> int:
     return _open(path).metadata.num_rows
 
 
+def read_footer(path: Path) -> tuple[LogMeta, int]:
+    """The log's metadata and its row count, from one read of its footer."""
+    pf = _open(path)
+    return _meta(Path(path), pf), pf.metadata.num_rows
+
+
 def _to_numpy(col: pa.ChunkedArray | pa.Array, width: int | None) -> np.ndarray:
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
@@ -296,7 +312,11 @@ def read_columns(path: Path, columns: list[str], start: int = 0,
 def iter_columns(path: Path, columns: list[str], start: int = 0,
                  stop: int | None = None) -> Iterator[dict[str, np.ndarray]]:
     """Yield the columns row group by row group, clipped to [start, stop)."""
-    pf = _open(path)
+    return _row_groups(path, _open(path), columns, start, stop)
+
+
+def _row_groups(path: Path, pf: pq.ParquetFile, columns: list[str], start: int,
+                stop: int | None) -> Iterator[dict[str, np.ndarray]]:
     _check_columns(path, pf, columns)
     stop = pf.metadata.num_rows if stop is None else stop
     offset = 0
@@ -322,18 +342,46 @@ def concat_columns(chunks: Iterable[dict[str, np.ndarray]], columns: list[str]
 
 @dataclass(frozen=True)
 class VerifiedLog:
-    """A log that passed :func:`verify_log`: its metadata and the spec it records."""
+    """A log that passed :func:`verify_log`: its metadata, the spec it records, the SHA-256 of
+    the bytes that were verified, and its table, read lazily by row group through the file
+    the verification opened (the same file, even if the path is replaced meanwhile)."""
 
     path: Path
     meta: LogMeta
     spec: Spec
+    sha256: str = ""
+    rows: int = 0
+    _file: pq.ParquetFile | None = field(default=None, repr=False, compare=False)
+
+    def _parquet(self) -> pq.ParquetFile:
+        return self._file if self._file is not None else _open(self.path)
+
+    def __getstate__(self) -> dict:
+        """Pickled (to a worker of the report) without its open file: a worker reads the
+        table by path."""
+        return {**self.__dict__, "_file": None}
+
+    def require(self, columns: list[str]) -> None:
+        """A LogError naming the first of ``columns`` the log lacks."""
+        _check_columns(self.path, self._parquet(), columns)
+
+    def iter_columns(self, columns: list[str], start: int = 0,
+                     stop: int | None = None) -> Iterator[dict[str, np.ndarray]]:
+        """The columns row group by row group, clipped to [start, stop)."""
+        return _row_groups(self.path, self._parquet(), columns, start, stop)
+
+    def columns(self, columns: list[str], start: int = 0,
+                stop: int | None = None) -> dict[str, np.ndarray]:
+        """Columns for rows [start, stop) as arrays (vectors as N×k)."""
+        return concat_columns(self.iter_columns(columns, start, stop), columns)
 
 
 def _damaged(path: Path, check: str, detail: str) -> LogDamaged:
     return LogDamaged(f"{path}: {check}: {detail} (tampered or damaged; nothing written)")
 
 
-def verify_log(path: Path | str) -> VerifiedLog:
+def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
+               ) -> VerifiedLog:
     """Check a log against its own metadata before anything believes it (architecture §6).
 
     - the metadata spec hashes, canonically, to ``pipeline.spec_hash`` and is a valid spec;
@@ -347,12 +395,39 @@ def verify_log(path: Path | str) -> VerifiedLog:
     - every numeric column is finite, but the condition numbers (``MAY_BE_INFINITE``), which
       may be +inf at an exact singularity and never NaN.
 
+    ``digest``: how a robot file is hashed (the artefact store's, which hashes each once).
+
     A missing or unreadable file or metadata key is a LogError (exit 2); a failed check is a
     LogDamaged (exit 1) naming the file, the check and the first offending step. Reads the log
     by row group: memory stays bounded by one row group.
     """
     path = Path(path)
-    meta = read_meta(path)
+    if not path.is_file():
+        raise LogError(f"{path}: log file not found")
+    # One open file for the hash and the checks: what is verified is what was hashed, and the
+    # table is read later through it (the same bytes, even if the path is replaced
+    # meanwhile). pyarrow's file, not Python's: nothing to close by hand; read, not mapped:
+    # a long log's pages do not stay in the process's memory.
+    try:
+        handle = pa.OSFile(str(path))
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise LogError(f"{path}: not a readable Parquet log ({str(exc).splitlines()[0]})"
+                       ) from None
+    sha = hashlib.sha256()
+    while chunk := handle.read(1 << 22):
+        sha.update(chunk)
+    handle.seek(0)
+    pf = _open(path, handle)
+    meta = _meta(path, pf)
+    spec = _verified_spec(path, meta, pf.metadata.num_rows)
+    spec._robot_path = _recorded_robot(path, meta, spec, digest)
+    _check_rows(path, pf, spec.mission.dt)
+    return VerifiedLog(path, meta, spec, sha.hexdigest(), pf.metadata.num_rows, pf)
+
+
+def _verified_spec(path: Path, meta: LogMeta, n: int) -> Spec:
+    """The spec the metadata records, checked against its hash, and the row count against
+    the status."""
     content = {k: v for k, v in meta.spec.items() if k not in ("name", "description")}
     try:
         digest = canonical_hash(content)
@@ -366,7 +441,6 @@ def verify_log(path: Path | str) -> VerifiedLog:
                           find_robot=False)
     except SpecError as exc:
         raise _damaged(path, "spec", f"the metadata spec is not a valid spec ({exc})") from None
-    n = num_rows(path)
     expected = {"complete": spec.n_steps,
                 "failed": meta.failed_step, "diverged": None if meta.failed_step is None
                 else meta.failed_step + 1}
@@ -378,19 +452,18 @@ def verify_log(path: Path | str) -> VerifiedLog:
         raise _damaged(path, "row count", f"{n} rows for a {meta.status} run (expected "
                        f"{expected[meta.status]}: {spec.n_steps} steps, failed step "
                        f"{meta.failed_step})")
-    spec._robot_path = _recorded_robot(path, meta, spec)
-    _check_rows(path, spec.mission.dt)
-    return VerifiedLog(path, meta, spec)
+    return spec
 
 
-def _recorded_robot(path: Path, meta: LogMeta, spec: Spec) -> Path:
+def _recorded_robot(path: Path, meta: LogMeta, spec: Spec,
+                    digest: Callable[[Path], str]) -> Path:
     """The robot file this log was run with, found by its content hash."""
     recorded = Path(meta.robot_file)
     candidates = [recorded] if recorded.is_absolute() else [Path.cwd() / recorded]
     candidates.append(find_on_search_path(spec.robot.file, path.parent))
     found = [c for c in candidates if c is not None and c.is_file()]
     for cand in found:
-        if file_digest(cand) == meta.robot_hash:
+        if digest(cand) == meta.robot_hash:
             return cand.resolve()
     if not found:
         raise LogError(f"{path}: its robot file {meta.robot_file} is not on disk")
@@ -398,9 +471,8 @@ def _recorded_robot(path: Path, meta: LogMeta, spec: Spec) -> Path:
                    f"with (its hash differs from pipeline.robot_hash)")
 
 
-def _check_rows(path: Path, dt: float) -> None:
+def _check_rows(path: Path, pf: pq.ParquetFile, dt: float) -> None:
     """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group."""
-    pf = _open(path)
     names = pf.schema_arrow.names
     _check_columns(path, pf, ["step", "t"])
     offset = 0

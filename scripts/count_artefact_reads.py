@@ -2,8 +2,10 @@
 
 Run from the repository after ``make all``: ``.venv/bin/python scripts/count_artefact_reads.py``.
 It makes sure the nominal and dt010 logs and the nominal analysis (against dt010) are current,
-then counts, for ``ensure_run`` and ``ensure_analysis`` of the nominal run reusing them, the
-calls of pyarrow's Parquet readers and of ``file_digest`` (by file name).
+then counts, for one command (a fresh artefact store) that has the dt010 log and then reuses
+the nominal log and its analysis against dt010, the calls of pyarrow's Parquet readers, of
+the log verification and of the file hashes (by file name), after the dt010 log is had
+(``reuse``) and over the whole command (``command``).
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ import sys
 
 import pyarrow.parquet as pq
 
+import pipeline.logs as logs
 import pipeline.provenance.keys as keys
-from pipeline.orchestrate import ensure_analysis, ensure_run
 from pipeline.spec import load_spec
+from pipeline.store.door import ArtefactStore
 
 COUNTS: collections.Counter = collections.Counter()
 
@@ -31,24 +34,37 @@ def main() -> None:
     for name in ("ParquetFile", "read_table", "read_metadata", "read_schema"):
         setattr(pq, name, _counting(name, getattr(pq, name)))
     digest = keys.file_digest
+    verify = logs.verify_log
+
+    def counted_verify(path, *args, **kwargs):
+        COUNTS[f"verify_log {str(path).rsplit('/', 2)[-2]}"] += 1
+        return verify(path, *args, **kwargs)
 
     def counted_digest(path):
         COUNTS[f"file_digest {str(path).rsplit('/', 1)[-1]}"] += 1
         return digest(path)
 
-    # Every module that imported it by name, not only its home.
+    # Every module that imported them by name, not only their home; and the default argument
+    # of the verification, bound when it was defined.
+    logs.verify_log.__defaults__ = (counted_digest,)
     for module in list(sys.modules.values()):
-        if getattr(module, "__name__", "").startswith("pipeline") and getattr(
-                module, "file_digest", None) is digest:
+        if not getattr(module, "__name__", "").startswith("pipeline"):
+            continue
+        if getattr(module, "file_digest", None) is digest:
             module.file_digest = counted_digest
-    against = ensure_run(load_spec("omega_ripple_dt010"), "logs")
-    run = ensure_run(load_spec("nominal"), "logs")
-    ensure_analysis(run, "generated_reports", against)  # made here if it was not current
+        if getattr(module, "verify_log", None) is verify:
+            module.verify_log = counted_verify
+    nominal, dt010 = load_spec("nominal"), load_spec("omega_ripple_dt010")
+    store = ArtefactStore("logs", "generated_reports")
+    store.analysis(store.run(nominal).log, store.run(dt010).log)  # made if it was not current
     COUNTS.clear()
-    run = ensure_run(load_spec("nominal"), "logs")
-    ensure_analysis(run, "generated_reports", against)
-    for name, n in sorted(COUNTS.items()):
-        print(f"{name}: {n}")
+    store = ArtefactStore("logs", "generated_reports")  # a new command
+    against = store.run(dt010)
+    whole = dict(COUNTS)
+    COUNTS.clear()
+    store.analysis(store.run(nominal).log, against.log)
+    for name in sorted(set(COUNTS) | set(whole)):
+        print(f"{name}: reuse {COUNTS[name]}, command {COUNTS[name] + whole.get(name, 0)}")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
+from pipeline.logs import verify_log
 from pipeline.paths import PROJECT_ROOT
 from pipeline.reports.render import render_all
 from pipeline.sim.run import run_spec
@@ -48,9 +49,9 @@ def write_spec(folder: Path, name: str, parent: str, **extra: str) -> Path:
 
 
 def analyse_pair(log: Path, against: Path | None, out: Path) -> dict:
-    record = analyze_log(log)
+    record = analyze_log(verify_log(log))
     if against is not None:
-        record["comparison"] = compare(record, analyze_log(against))
+        record["comparison"] = compare(record, analyze_log(verify_log(against)))
     write_analysis(record, out)
     return record
 

@@ -148,13 +148,13 @@ def test_the_fastest_mode_is_named_along_the_whole_log(tmp_path, name, mode):
     seed robot's bus yaw, the servicer's camera roll, on every sampled step, with the largest
     dt·μ_max equal to the guard's logged maximum at those steps."""
     from pipeline.analysis.stages import fastest_modes_along
-    from pipeline.logs import read_columns
+    from pipeline.logs import read_columns, verify_log
     from pipeline.sim.robot import GiordanoRobot
     from pipeline.sim.run import run_spec
 
     spec = with_overrides(load_spec(name), {"mission.duration": 3.0})
     path = run_spec(spec, tmp_path).path
-    got = fastest_modes_along(GiordanoRobot(spec), spec, path, samples=12)
+    got = fastest_modes_along(GiordanoRobot(spec), spec, verify_log(path), samples=12)
     assert got["share"] == {mode: 1.0} and got["samples"] == 12
     logged = read_columns(path, ["dt_mu_max"])["dt_mu_max"]
     assert got["dt_mu_max"] == pytest.approx(logged[got["step_of_max"]], rel=1e-9)

@@ -13,6 +13,7 @@ from numba.core.registry import CPUDispatcher
 
 from pipeline import compile as kc
 from pipeline.analysis.stages import analyze_log
+from pipeline.logs import verify_log
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 
@@ -38,7 +39,7 @@ def test_after_the_compile_units_a_run_its_analysis_and_the_checks_compile_nothi
     assert not one, f"more than one specialisation: {one}"
     before = compiled()
     spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 3.0}, name="warm")
-    analyze_log(run_spec(spec, tmp_path).path)
+    analyze_log(verify_log(run_spec(spec, tmp_path).path))
     build_cross_check()
     new = {n: c - before.get(n, 0) for n, c in compiled().items() if c > before.get(n, 0)}
     assert not new, f"compiled after the compile stage: {new}"
@@ -50,12 +51,13 @@ def test_after_the_compile_units_a_run_its_analysis_and_the_checks_compile_nothi
 # equation checks, then the number of kernels each dispatcher compiled (cache misses).
 _AFTER_COMPILE = """
 from pipeline.analysis.stages import analyze_log
+from pipeline.logs import verify_log
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 from pipeline.verify.cross_check import build_cross_check
 import sys
 spec = with_overrides(load_spec("short_nominal"), {"mission.duration": 3.0}, name="cold")
-analyze_log(run_spec(spec, sys.argv[1]).path)
+analyze_log(verify_log(run_spec(spec, sys.argv[1]).path))
 build_cross_check()
 from numba.core.registry import CPUDispatcher
 print(sorted(f"{m}.{k}" for m, mod in list(sys.modules.items()) if m.startswith("pipeline.")

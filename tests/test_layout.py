@@ -68,14 +68,14 @@ def test_the_cycle_finder_finds_a_cycle():
 # only units of its own layer or below. Data flows up: sim writes logs, analysis reads them,
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
-    ("errors", "paths", "artefact_paths", "yamlfile", "version", "progress", "provenance.keys",
-     "provenance", "platform"),
+    ("errors", "paths", "artefact_paths", "yamlfile", "version", "progress", "provenance",
+     "platform"),
     ("spec", "budget"),
     ("logs",),
     ("sim",),
     ("analysis",),
-    ("provenance.validity", "verify", "sweep"),
-    ("orchestrate",),
+    ("store",),
+    ("verify", "sweep"),
     ("claims",),
     ("reports",),
     ("bench", "bench_linalg", "validate", "compile", "cli", "__main__"),
@@ -113,3 +113,51 @@ def test_every_unit_has_a_layer():
     units = {_unit(_module(p)) for p in PKG.rglob("*.py")
              if "__pycache__" not in p.parts and p != PKG / "__init__.py"}
     assert units <= set(RANK), sorted(units - set(RANK))
+
+
+# The log format's readers (pipeline/logs.py). Outside the format itself, only the artefact
+# store opens a log (it verifies it once and hands it out); the modules below read logs on
+# their own, each for a reason that is not "reuse or make" and is written here.
+LOG_READERS = {"read_columns", "iter_columns", "read_meta", "read_footer", "num_rows",
+               "verify_log", "file_metadata", "require_columns"}
+READS_LOGS_ITSELF = {
+    "pipeline.store.door": "the door: verifies each log once and hands it out",
+    "pipeline.store.validity": "the door's predicate reads a log's footer to decide reuse",
+    "pipeline.claims.baselines": "compares pinned logs with their re-runs as files, bitwise "
+                                 "and column by column (pinned logs are not the store's)",
+    "pipeline.bench": "writes the benchmark's long log from a short one (a writer's read)",
+}
+# Reuse is decided by the door alone: these predicates are called nowhere else.
+REUSE_PREDICATES = {"current_log", "current_analysis"}
+
+
+def _imported_names(path) -> set[tuple[str, str]]:
+    """(module, name) of every ``from pipeline.X import name`` in a file, lazy ones included."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out |= {(node.module, a.name) for a in node.names}
+    return out
+
+
+def test_only_the_door_opens_a_log_or_decides_reuse():
+    offenders = []
+    for path in PKG.rglob("*.py"):
+        mod = _module(path)
+        if "__pycache__" in path.parts or mod == "pipeline.logs":
+            continue
+        for module, name in _imported_names(path):
+            if (module == "pipeline.logs" and name in LOG_READERS
+                    and mod not in READS_LOGS_ITSELF):
+                offenders.append(f"{mod} imports {name}")
+            if (module == "pipeline.store.validity" and name in REUSE_PREDICATES
+                    and mod != "pipeline.store.door"):
+                offenders.append(f"{mod} decides reuse with {name}")
+    assert not offenders, "; ".join(sorted(offenders))
+
+
+def test_the_door_check_sees_an_offender(tmp_path, monkeypatch):
+    """The check above finds a reader imported where it should not be."""
+    f = tmp_path / "x.py"
+    f.write_text("def f():\n    from pipeline.logs import read_columns\n")
+    assert ("pipeline.logs", "read_columns") in _imported_names(f)

@@ -39,7 +39,7 @@ import scipy.linalg as sla
 
 from pipeline.analysis.directions import rebuild_gamma
 from pipeline.analysis.stages import analyze_log
-from pipeline.logs import read_columns
+from pipeline.logs import read_columns, verify_log
 from pipeline.paths import PROJECT_ROOT
 from pipeline.sim import robot_file
 from pipeline.sim.robot import GiordanoRobot
@@ -72,7 +72,7 @@ def peer_run(request, tmp_path_factory) -> PeerRun:
     robot = GiordanoRobot(spec)
     cols = read_columns(path, ["q", "v", "s_min_J", "s_min_G", "kappa_G", "dt_mu_max"])
     n = len(cols["q"])
-    record = analyze_log(path)
+    record = analyze_log(verify_log(path))
     steps = sorted({*np.linspace(0, n - 1, N_STEPS).astype(int).tolist(),
                     record["theory"]["step"]})
     below = [k for k in steps if cols["s_min_J"][k] < robot.floor]

@@ -1,5 +1,5 @@
 """What `make all` shows: each stage's start and end lines on stderr, plain off a terminal
-(pipeline/progress.py), for the stages the claims run on demand (pipeline/orchestrate.py), and
+(pipeline/progress.py), for the stages the claims run on demand (pipeline/store/door.py), and
 the compile stage's plan (pipeline/compile.py)."""
 
 from __future__ import annotations
@@ -11,10 +11,11 @@ from types import SimpleNamespace
 import pytest
 
 from pipeline import compile as kc
-from pipeline import orchestrate
 from pipeline.progress import stage
+from pipeline.sim import run as sim_run
 from pipeline.sim.run import RunOutcome
 from pipeline.spec import load_spec, with_overrides
+from pipeline.store.door import ArtefactStore
 
 DONE = re.compile(r"^(.+): done in \d+\.\d s(?: \((.*)\))?$")
 
@@ -45,10 +46,11 @@ def test_a_mission_the_claims_run_is_a_stage_with_plain_lines_off_a_terminal(
         seen["progress"] = progress
         return RunOutcome(Path(logs_dir) / spec_.name / "run.parquet", "complete", 3, [])
 
-    monkeypatch.setattr(orchestrate, "run_spec", fake_run)
-    log = SimpleNamespace(spec=spec, path=tmp_path / "tiny" / "run.parquet", meta=None)
-    monkeypatch.setattr(orchestrate, "verify_log", lambda path: log)
-    orchestrate.ensure_run(spec, tmp_path)
+    monkeypatch.setattr(sim_run, "run_spec", fake_run)
+    log = SimpleNamespace(spec=spec, path=tmp_path / "tiny" / "run.parquet",
+                          meta=SimpleNamespace(status="complete"))
+    monkeypatch.setattr(ArtefactStore, "open_log", lambda self, path: log)
+    ArtefactStore(tmp_path).run(spec)
     err = capsys.readouterr().err
     assert seen["progress"] is False and "\r" not in err
     lines = err.splitlines()

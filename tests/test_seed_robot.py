@@ -28,7 +28,7 @@ from conftest import SEEDS, random_state, run_cli
 from pipeline.analysis import theory
 from pipeline.analysis.stages import analyze_log
 from pipeline.errors import SpecError
-from pipeline.logs import num_rows, read_columns, read_meta
+from pipeline.logs import num_rows, read_columns, read_meta, verify_log
 from pipeline.paths import SHIPPED_SPECS
 from pipeline.sim.base_controller import block_gains
 from pipeline.sim.robot import GiordanoRobot
@@ -189,7 +189,7 @@ def test_reduced_inertia_at_the_representative_step_matches_the_kinetic_energy(
         robot, short_nominal_log):
     """M̆ at the analysis' representative step against M̆ from finite differences of the
     kinetic energy; μ_max there against the closed form D_b / I_zz,bus."""
-    rec = analyze_log(short_nominal_log)
+    rec = analyze_log(verify_log(short_nominal_log))
     k = rec["theory"]["step"]
     q = read_columns(short_nominal_log, ["q"], k, k + 1)["q"][0]
     T = robot.terms(q, np.zeros(12))
@@ -279,7 +279,7 @@ def test_unbounded_mission_ends_diverged_with_the_bound_and_the_fix(tmp_path):
     c = read_columns(log, ["sat_v_max"])
     assert c["sat_v_max"][-3:].all()  # the criterion: three consecutive steps on the clip
 
-    rec = analyze_log(log)
+    rec = analyze_log(verify_log(log))
     g = rec["divergence"]
     assert rec["status"] == "diverged" and "divergence step" in rec["note"]
     assert g["alternating"] and g["fit_steps"][1] - g["fit_steps"][0] >= 4
@@ -334,13 +334,13 @@ def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
 
     logs, out = tmp_path / "logs", tmp_path / "rep"
     run_spec(load_spec("omega_ripple_unbounded"), logs, raise_on_failure=False)
-    write_analysis(analyze_log(logs / "omega_ripple_unbounded" / "run.parquet"), out)
+    write_analysis(analyze_log(verify_log(logs / "omega_ripple_unbounded" / "run.parquet")), out)
     spec = with_overrides(load_spec("nominal"), {"mission.duration": 6.0}, name="n6")
     dt010 = with_overrides(load_spec("omega_ripple_dt010"), {"mission.duration": 6.0},
                            name="d6")
     a, b = run_spec(spec, logs).path, run_spec(dt010, logs).path
-    rec = analyze_log(a)
-    rec["comparison"] = compare(rec, analyze_log(b))
+    rec = analyze_log(verify_log(a))
+    rec["comparison"] = compare(rec, analyze_log(verify_log(b)))
     write_analysis(rec, out)
     render_all(out)
     index = (out / "index.html").read_text()

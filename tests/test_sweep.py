@@ -31,6 +31,7 @@ from pipeline.errors import LogError, SpecError
 from pipeline.logs import num_rows, read_meta
 from pipeline.paths import PROJECT_ROOT
 from pipeline.spec import load_spec
+from pipeline.store.locks import folder_lock, remove_stale_temps
 from pipeline.sweep import build_grid, parse_sets, plan_sweep, point_name, stability_bracket
 from pipeline.sweep.cluster import (
     default_lifetime,
@@ -39,7 +40,6 @@ from pipeline.sweep.cluster import (
     walltime_seconds,
 )
 from pipeline.sweep.grid import parse_value
-from pipeline.sweep.point import point_lock, remove_stale_temps
 
 SHORT = ["--set", "mission.duration=1.0"]
 FOUR = [*SHORT, "--set", "mission.dt=0.02,0.03", "--set", "controller.gains.cam_ori.D=1.0,1.5"]
@@ -312,12 +312,12 @@ def test_two_overlapping_sweeps_at_once_share_each_point_once(tmp_path):
 
 # -- the per-point lock -------------------------------------------------------------------------
 
-def test_point_lock_excludes_and_survives_a_killed_holder(tmp_path):
+def test_folder_lock_excludes_and_survives_a_killed_holder(tmp_path):
     order: list[str] = []
     inside = threading.Event()
 
     def hold():
-        with point_lock(tmp_path / "p"):
+        with folder_lock(tmp_path / "p"):
             inside.set()
             time.sleep(0.3)
             order.append("first out")
@@ -325,15 +325,15 @@ def test_point_lock_excludes_and_survives_a_killed_holder(tmp_path):
     t = threading.Thread(target=hold)
     t.start()
     inside.wait(5)
-    with point_lock(tmp_path / "p"):
+    with folder_lock(tmp_path / "p"):
         order.append("second in")
     t.join()
     assert order == ["first out", "second in"]
     assert not (tmp_path / "p" / ".lock").exists()
 
     # a holder killed with the lock: the kernel releases it; the next holder cleans up
-    code = ("import sys, time; from pathlib import Path; from pipeline.sweep.point import "
-            "point_lock\nwith point_lock(Path(sys.argv[1])):\n"
+    code = ("import sys, time; from pathlib import Path; from pipeline.store.locks import "
+            "folder_lock\nwith folder_lock(Path(sys.argv[1])):\n"
             "    (Path(sys.argv[1]) / '.run.parquet.x.tmp').write_text('torn')\n"
             "    print('held', flush=True); time.sleep(60)")
     holder = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "q")],
@@ -343,7 +343,7 @@ def test_point_lock_excludes_and_survives_a_killed_holder(tmp_path):
     holder.wait(10)
     assert (tmp_path / "q" / ".lock").exists()  # stale file left behind ...
     t0 = time.monotonic()
-    with point_lock(tmp_path / "q"):  # ... but not a stale lock
+    with folder_lock(tmp_path / "q"):  # ... but not a stale lock
         assert remove_stale_temps(tmp_path / "q") == [".run.parquet.x.tmp"]
     assert time.monotonic() - t0 < 2
     assert list((tmp_path / "q").iterdir()) == []

@@ -158,7 +158,7 @@ def test_the_analysis_reads_dt_from_the_verified_log_only(log, tmp_path):
     with exit 0 and dt·μ_max for the wrong dt; now it never reaches the analysis."""
     path = _rewrite(log, tmp_path / "x" / "run.parquet", meta=_edited_dt(log))
     with pytest.raises(LogDamaged, match="spec hash"):
-        analyze_log(path)
+        analyze_log(verify_log(path))
 
 
 def test_nan_is_never_no_difference_in_the_baselines(log, tmp_path):
@@ -176,7 +176,7 @@ def analysed(log, tmp_path_factory) -> Path:
     from pipeline.analysis.record import write_analysis
 
     out = tmp_path_factory.mktemp("analysed")
-    write_analysis(analyze_log(log), out)
+    write_analysis(analyze_log(verify_log(log)), out)
     return out
 
 
@@ -352,7 +352,7 @@ def test_an_analysis_pair_is_written_whole_or_not_at_all(log, tmp_path, monkeypa
     import pipeline.analysis.record as record
     from pipeline.errors import OutputError
 
-    rec = analyze_log(log)
+    rec = analyze_log(verify_log(log))
 
     def full(path, text):
         raise OutputError(f"{path}: cannot write: No space left on device")

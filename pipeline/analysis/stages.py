@@ -18,15 +18,8 @@ from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm
 from pipeline.errors import CheckFailed, LogError, SpecError
-from pipeline.logs import (
-    LogMeta,
-    iter_columns,
-    num_rows,
-    read_columns,
-    require_columns,
-    verify_log,
-)
-from pipeline.provenance.keys import analysis_version, file_digest
+from pipeline.logs import VerifiedLog
+from pipeline.provenance.keys import analysis_version
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import batched_singular_values
@@ -98,23 +91,25 @@ def require_provenance(path, prov: dict) -> None:
                           f"(tolerance {PROVENANCE_TOL:g})")
 
 
-def analyze_log(path, window_start: float | None = None, check: bool = True) -> dict:
-    """All single-log stages; returns the analysis record (the content of analysis.json)."""
-    log = verify_log(path)
-    meta, spec = log.meta, log.spec
+def analyze_log(log: VerifiedLog, window_start: float | None = None,
+                check: bool = True) -> dict:
+    """All single-log stages; returns the analysis record (the content of analysis.json).
+    ``log``: a verified log, as the artefact store hands it out
+    (:meth:`pipeline.store.door.ArtefactStore.open_log`)."""
+    path, meta, spec = log.path, log.meta, log.spec
     if meta.status == "diverged":
-        return divergence_record(path, meta, spec)
+        return divergence_record(log)
     if meta.status != "complete":
         raise LogError(f"{path}: log marked {meta.status} at step {meta.failed_step}: "
                        f"{meta.error}")
-    require_columns(path, REQUIRED)
-    n = num_rows(path)
+    log.require(REQUIRED)
+    n = log.rows
     dt = spec.mission.dt
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(spec)
 
     # Stages 1 and 2: Γ rebuilt at every step, velocity projected in the window.
-    prov, y, sigma = rebuild_and_project(robot, path, win)
+    prov, y, sigma = rebuild_and_project(robot, log, win)
     if check:
         require_provenance(path, prov)
 
@@ -134,10 +129,10 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     ]
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
-    cols = read_columns(path, [c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
-                        win.start, win.stop)
+    cols = log.columns([c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
+                       win.start, win.stop)
     rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
-    th = theory_at_step(robot, spec, path, win.start + rep.index)
+    th = theory_at_step(robot, spec, log, win.start + rep.index)
     th["record"].update(rule=rep.rule, window_steps_below_floor=rep.below_floor,
                         at_or_above_floor=rep.above_floor)
     card = robot.card(th["q"])
@@ -146,7 +141,7 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
     data_dir = signals.dominant_step_direction(cols["v"])
     jumps = signals.velocity_jumps(cols["v"])
     return {
-        "spec_name": spec.name, "log": str(path), "log_sha256": file_digest(path),
+        "spec_name": spec.name, "log": str(path), "log_sha256": log.sha256,
         "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
         "analysis_version": analysis_version(),
         "integrator": spec.controller.integrator,
@@ -172,15 +167,15 @@ def analyze_log(path, window_start: float | None = None, check: bool = True) -> 
         "robot": asdict(card),
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
         "bus_mode": {"dt_mu_bus": dt * card.mu_bus, "critical_I_zz": dt * card.D_b / 2},
-        "mu_max_log": mu_max_along(path, dt, card.mu_bus, robot.floor),
-        "modes_along": fastest_modes_along(robot, spec, path),
+        "mu_max_log": mu_max_along(log, dt, card.mu_bus, robot.floor),
+        "modes_along": fastest_modes_along(robot, spec, log),
     }
 
 
 GROWTH_FLOOR = 1e-3  # rad/s: a step of ω_b above the smooth motion's (~1e-5) and rounding
 
 
-def divergence_record(path, meta: LogMeta, spec: Spec) -> dict:
+def divergence_record(log: VerifiedLog) -> dict:
     """The divergence stage, the only one a ``diverged`` log gets (eqs. 22, 23): the growth
     of ω_b per step before the v_max clip, against Φ's dominant eigenvalue.
 
@@ -190,12 +185,13 @@ def divergence_record(path, meta: LogMeta, spec: Spec) -> dict:
     the measured factor is exp(slope) of log|d_k| by least squares, negative when d_k
     alternates in sign. Φ (both update orders) is evaluated at the fit's first step.
     """
-    require_columns(path, REQUIRED)
-    n = num_rows(path)
+    path, meta, spec = log.path, log.meta, log.spec
+    log.require(REQUIRED)
+    n = log.rows
     robot = GiordanoRobot(spec)
-    prov, _, _ = rebuild_and_project(robot, path, Window(0, n, "the whole diverged log"))
+    prov, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
     require_provenance(path, prov)
-    cols = read_columns(path, ["v_breve", *LIMIT_FLAGS])
+    cols = log.columns(["v_breve", *LIMIT_FLAGS])
     bound = np.zeros(n, dtype=bool)
     for f in LIMIT_FLAGS:
         bound |= cols[f]
@@ -212,12 +208,12 @@ def divergence_record(path, meta: LogMeta, spec: Spec) -> dict:
     slope = np.polyfit(k, np.log(np.abs(d[fit])), 1)[0]
     alternating = bool(np.all(np.sign(d[fit][1:]) != np.sign(d[fit][:-1])))
     factor = float(np.exp(slope) * (-1.0 if alternating else 1.0))
-    th = theory_at_step(robot, spec, path, int(fit[0]))
+    th = theory_at_step(robot, spec, log, int(fit[0]))
     rec = th["record"]
     sim = rec["eig_dominant"]["real"]
     note = rec["note_order"]["eig_dominant"]["real"]
     return {
-        "spec_name": spec.name, "log": str(path), "log_sha256": file_digest(path),
+        "spec_name": spec.name, "log": str(path), "log_sha256": log.sha256,
         "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
         "analysis_version": analysis_version(),
         "integrator": spec.controller.integrator,
@@ -250,13 +246,13 @@ def _batches(chunks, size: int = BATCH):
             yield {k: a[lo:lo + size] for k, a in chunk.items()}
 
 
-def rebuild_and_project(robot: GiordanoRobot, path, win: Window
+def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
                         ) -> tuple[dict, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
     y (eq. 26) and singular values of Γ over the window (singular vectors only there)."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
     ys, sigmas, V_prev = [], [], None
-    for chunk in _batches(iter_columns(path, ["step", "q", "v", "s_min_G", "kappa_G"])):
+    for chunk in _batches(log.iter_columns(["step", "q", "v", "s_min_G", "kappa_G"])):
         gamma = rebuild_gamma(robot, chunk["q"])
         keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
         sigma = np.empty((len(gamma), gamma.shape[1]))
@@ -277,17 +273,17 @@ def rebuild_and_project(robot: GiordanoRobot, path, win: Window
         rel_k[np.isnan(rel_k)] = np.inf
         worst_kappa = max(worst_kappa, float(rel_k.max(initial=0.0)))
     if not ys:
-        raise LogError(f"{path}: no row's step lies in the analysis window "
+        raise LogError(f"{log.path}: no row's step lies in the analysis window "
                        f"[{win.start}, {win.stop}): the step column is not 0, 1, …")
     prov = {"max_abs_s_min_G": worst, "worst_step": worst_step, "max_rel_kappa_G": worst_kappa,
             "tolerance": PROVENANCE_TOL}
     return prov, np.concatenate(ys), np.concatenate(sigmas)
 
 
-def theory_at_step(robot: GiordanoRobot, spec: Spec, path, k: int) -> dict:
+def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> dict:
     """Stage 4 at step k: μ, dt·μ_max, dt*, Φ for both integrators, the dominant mode
     (eqs. 21–24) and its velocity direction for the alignment (eq. 27)."""
-    row = read_columns(path, ["q", "v", "x_tilde", "s_min_G"], k, k + 1)
+    row = log.columns(["q", "v", "x_tilde", "s_min_G"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, spec.controller)
     K, D = block_gains(spec.controller, gamma)
@@ -395,11 +391,11 @@ def prediction(theory_record: dict, lag1: float) -> dict:
             "agrees": bool(np.isfinite(lag1) and predicted == measured)}
 
 
-def mu_max_along(path, dt: float, mu_bus: float, floor: float) -> dict:
+def mu_max_along(log: VerifiedLog, dt: float, mu_bus: float, floor: float) -> dict:
     """μ_max = dt_mu_max/dt over every logged step against the closed form μ_bus = D_b/I_zz,bus
     (eq. 21): its range, the largest relative deviation, and how near the log came to the
     singularity (the smallest s_min_J and s_min_G, and the damped inverse's floor, eq. 6)."""
-    c = read_columns(path, ["dt_mu_max", "s_min_J", "s_min_G"])
+    c = log.columns(["dt_mu_max", "s_min_J", "s_min_G"])
     mu = c["dt_mu_max"] / dt
     dev = np.abs(mu / mu_bus - 1.0)
     return {"min": float(mu.min()), "max": float(mu.max()), "closed_form": mu_bus,
@@ -412,13 +408,13 @@ def mu_max_along(path, dt: float, mu_bus: float, floor: float) -> dict:
 MODE_SAMPLES = 60  # steps, evenly spaced over the log, at which every damping mode is named
 
 
-def fastest_modes_along(robot: GiordanoRobot, spec: Spec, path, samples: int = MODE_SAMPLES
-                        ) -> dict:
+def fastest_modes_along(robot: GiordanoRobot, spec: Spec, log: VerifiedLog,
+                        samples: int = MODE_SAMPLES) -> dict:
     """The fastest damping mode of M̆⁻¹D̆ named at ``samples`` steps spread evenly over the
     whole log (eq. 21), M̆ rebuilt from the logged (q, v), D̆ from the gains and the logged γ:
     how often each mode is the fastest, and the largest dt·μ_max with its step and mode. The
     online guard logs dt·μ_max at every step but not whose it is."""
-    c = read_columns(path, ["q", "v", "gamma"])
+    c = log.columns(["q", "v", "gamma"])
     n, dt = len(c["gamma"]), spec.mission.dt
     steps = np.unique(np.linspace(0, n - 1, min(samples, n)).round().astype(int))
     names, dt_mus = [], []

@@ -34,9 +34,9 @@ from pipeline.logs import LogError, atomic_write_bytes, atomic_write_text, read_
 from pipeline.paths import SHIPPED_SPECS, display_path
 from pipeline.platform import Platform, describe, differences, fingerprint
 from pipeline.provenance.keys import file_digest, sim_version
-from pipeline.provenance.validity import current_baselines
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec
+from pipeline.store.validity import current_baselines
 
 # Relative to the working directory, like every output: make runs from the checkout's root.
 PINNED = Path("logs") / "baselines"

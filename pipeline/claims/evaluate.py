@@ -10,21 +10,18 @@ NOW HOLDS (an ``open`` claim that holds: like a strict xfail, exit 1 until it is
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.analysis.record import RECORD_NAME
 from pipeline.analysis.signals import lag1_autocorrelation
 from pipeline.artefact_paths import log_path
-from pipeline.claims.record import read_claims_json, write_claims_json
+from pipeline.claims.record import CheckEval, ClaimEval, read_claims_json, write_claims_json
 from pipeline.claims.register import (
     LOG_GROUPS,
     OPERATORS,
-    Claim,
-    ClaimCheck,
     ClaimsFile,
     load_claims,
     needed_runs,
@@ -33,53 +30,23 @@ from pipeline.claims.register import (
     split_metric,
 )
 from pipeline.errors import SpecError
-from pipeline.logs import read_columns
-from pipeline.orchestrate import RunRecord, ensure_analysis, ensure_run
 from pipeline.paths import display_path
 from pipeline.provenance.keys import source_version
 from pipeline.spec import load_spec, resolve_spec_path
+from pipeline.store.door import ArtefactStore, StoredRun
 
 if TYPE_CHECKING:
     from pipeline.verify.cross_check import CrossCheck
 
 
-@dataclass
-class CheckEval:
-    check: ClaimCheck
-    value: Any
-    threshold: Any
-    ok: bool
-
-    @property
-    def symbol(self) -> str:
-        return OPERATORS[self.check.op][1]
-
-
-@dataclass
-class ClaimEval:
-    claim: Claim
-    checks: list[CheckEval]
-    provenance: list[dict] = field(default_factory=list)
-
-    @property
-    def holds(self) -> bool:
-        return all(c.ok for c in self.checks)
-
-    @property
-    def status(self) -> str:
-        if self.claim.expect == "hold":
-            return "PASS" if self.holds else "FAIL"
-        return "NOW HOLDS" if self.holds else "OPEN"
-
-
-def log_statistic(path: Path, start: int, group: str, stat: str) -> float:
+def log_statistic(run: StoredRun, start: int, group: str, stat: str) -> float:
     """A statistic of the logged reduced velocity v̆ over the analysis window.
 
     ripple: the largest period-2 amplitude of a component, RMS(Δ²x)/4 (an alternating
     a(−1)^k has Δ²x = 4a(−1)^k, a smooth signal almost none); step_rms: the largest RMS of
     Δx; rms; lag1_min / lag1_max: the extreme lag-1 autocorrelations (eq. 25) of the components.
     """
-    x = read_columns(path, ["v_breve"], start)["v_breve"][:, LOG_GROUPS[group]]
+    x = run.log.columns(["v_breve"], start)["v_breve"][:, LOG_GROUPS[group]]
     if stat == "ripple":
         return float(np.max(np.sqrt(np.mean(np.diff(x, 2, axis=0) ** 2, axis=0)) / 4))
     if stat == "step_rms":
@@ -110,17 +77,18 @@ class Context:
         self.cf, self.out = cf, Path(out_dir)
         self.logs = Path(cf.logs)  # relative to the working directory, like --out
         self.here = Path(cf.source).resolve().parent
-        self.runs: dict[str, RunRecord] = {}
+        self.store = ArtefactStore(self.logs, self.out)
+        self.runs: dict[str, StoredRun] = {}
         self.analyses: dict[str, dict] = {}
         self._cross: dict | None = None
         # The CrossCheck itself, for a report in this process (`pipeline all`).
         self.cross_check_result: CrossCheck | None = None
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
-        self._jobs: dict = {}  # alias -> orchestrate.SweepJob, started by start_sweeps
+        self._jobs: dict = {}  # alias -> sweep.background.SweepJob, started by start_sweeps
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key
-        # (pipeline.provenance.validity.current_claims).
+        # (pipeline.store.validity.current_claims).
         self.files: list[Path] = []
 
     def _spec(self, name: str):
@@ -128,14 +96,15 @@ class Context:
 
     def prepare(self) -> None:
         for name in needed_runs(self.cf):
-            self.runs[name] = ensure_run(self._spec(name), self.logs, self.cf.runs[name].expect)
+            self.runs[name] = self.store.run(self._spec(name), self.cf.runs[name].expect)
             self.files.append(self.runs[name].path)
         for name in needed_runs(self.cf):
             dep = self.cf.runs[name].against
-            self.analyses[name] = ensure_analysis(
-                self.runs[name], self.out, self.runs.get(dep),
-                self.analyses.get(dep) if dep else None)
-            self.files.append(self.out / self.runs[name].spec.name / RECORD_NAME)
+            done = self.store.analysis(
+                self.runs[name].log, self.runs[dep].log if dep else None,
+                against_record=self.analyses.get(dep) if dep else None)
+            self.analyses[name] = done.record
+            self.files.append(done.path)
 
     def note(self):
         """The seed note's published values (the claims file's ``note:``), or None."""
@@ -179,7 +148,7 @@ class Context:
     def start_sweeps(self) -> None:
         """Start every sweep the claims use that is not current, in the background (each its
         own process and Dask cluster), before the missions: they need only the kernels."""
-        from pipeline.orchestrate import start_sweep
+        from pipeline.sweep.background import start_sweep
 
         for alias in needed_sweeps(self.cf):
             ref = self.cf.sweeps[alias]
@@ -193,7 +162,7 @@ class Context:
 
     def sweep(self, alias: str) -> tuple[dict, dict]:
         if alias not in self._sweeps:
-            from pipeline.orchestrate import finish_sweep
+            from pipeline.sweep.background import finish_sweep
 
             ref = self.cf.sweeps[alias]
             self._sweeps[alias] = finish_sweep(self._jobs[alias], ref.key, ref.lag,
@@ -236,7 +205,7 @@ class Context:
         if head == "log":
             group, stat = rest.split(".")
             start = record["window"]["start_step"]
-            return log_statistic(run.path, start, group, stat), prov
+            return log_statistic(run, start, group, stat), prov
         return dig(record, path, f"the analysis.json of {source}"), prov
 
 

@@ -1,26 +1,53 @@
 """``claims.json``: the evaluated register as the claims stage leaves it. Written once per
 evaluation; read back for the summary lines, the counts and the exit code (the same whether
-the register was evaluated now or is reused, ``pipeline.provenance.validity.current_claims``)
+the register was evaluated now or is reused, ``pipeline.store.validity.current_claims``)
 and by the reports."""
 
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pipeline.artefact_paths import CLAIMS_FILE
-from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, ClaimsFile
+from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, Claim, ClaimCheck, ClaimsFile
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_text
 from pipeline.paths import display_path
 
-if TYPE_CHECKING:
-    from pipeline.claims.evaluate import ClaimEval
-
 STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
 RECORD_NAME = CLAIMS_FILE
+
+
+@dataclass
+class CheckEval:
+    check: ClaimCheck
+    value: Any
+    threshold: Any
+    ok: bool
+
+    @property
+    def symbol(self) -> str:
+        return OPERATORS[self.check.op][1]
+
+
+@dataclass
+class ClaimEval:
+    claim: Claim
+    checks: list[CheckEval]
+    provenance: list[dict] = field(default_factory=list)
+
+    @property
+    def holds(self) -> bool:
+        return all(c.ok for c in self.checks)
+
+    @property
+    def status(self) -> str:
+        if self.claim.expect == "hold":
+            return "PASS" if self.holds else "FAIL"
+        return "NOW HOLDS" if self.holds else "OPEN"
 
 
 def _jsonable(x: Any) -> Any:

@@ -276,7 +276,7 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
     (``extends`` merged), its note file, and each run's and sweep's spec (its content, as the
     evaluation finds it on the search path, ``extends`` merged) with its robot file. With the
     bytes of every artefact the evaluation read and wrote, this is the claims' key
-    (:func:`pipeline.provenance.validity.current_claims`)."""
+    (:func:`pipeline.store.validity.current_claims`)."""
     import hashlib
 
     from pipeline.provenance.keys import file_digest

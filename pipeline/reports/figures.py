@@ -20,7 +20,7 @@ import pandas as pd
 from matplotlib.ticker import MaxNLocator
 
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_bytes, read_columns
+from pipeline.logs import VerifiedLog, atomic_write_bytes
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.stability import REDUCED_SYMBOLS
 
@@ -40,13 +40,15 @@ class Figure:
 
 @dataclass(frozen=True)
 class RunData:
-    """An analysed run: its record and the path of its log (None if the log is gone)."""
+    """An analysed run: its record and the verified log it was made from (None if that log
+    is gone, damaged or re-run since), and the log of the run it is compared with (likewise)."""
 
     name: str
     record: dict
-    log: Path | None
+    log: VerifiedLog | None
     spec: dict  # the resolved spec from the log's metadata ({} without a log)
     folder: str  # the folder of analysis.json under the report root
+    against: VerifiedLog | None = None
 
     @property
     def description(self) -> str:
@@ -160,7 +162,7 @@ def draw_or_why(draw: Callable[[Path], str | None], path: Path) -> str | None:
 
 
 def _cols(run: RunData, cols: list[str]) -> dict[str, np.ndarray]:
-    return read_columns(run.log, cols)
+    return run.log.columns(cols)
 
 
 def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = None) -> None:
@@ -401,13 +403,15 @@ def sweep_map(table: Path, path: Path) -> str | None:
 def _omega_b_acc_bound(df: pd.DataFrame) -> float | None:
     """The ω_b acceleration bound of a sweep's points (their specs', read from a log's
     metadata), or None when no log is readable or the points differ in it."""
-    from pipeline.logs import read_meta
+    from pipeline.errors import PipelineError
+    from pipeline.store.door import ArtefactStore
 
+    store = ArtefactStore()
     bounds = set()
     for log in df.get("log", pd.Series(dtype=str)).dropna():
         try:
-            bounds.add(float(read_meta(Path(log)).spec["controller"]["limits"]["omega_b_acc"]))
-        except (LogError, OSError, KeyError, TypeError, ValueError):
+            bounds.add(float(store.open_log(log).spec.controller.limits.omega_b_acc))
+        except (PipelineError, OSError):
             return None
     return bounds.pop() if len(bounds) == 1 else None
 
@@ -530,15 +534,13 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
     _save(fig, path)
 
 
-def against_log(run: RunData) -> Path | None:
-    """The log of the run ``run`` is compared with, when both logs are there (the pair's
-    figures need them), else None."""
-    comp = run.record.get("comparison") or {}
-    path = Path(comp["against_log"]) if comp.get("against_log") else None
-    return path if run.log is not None and path is not None and path.is_file() else None
+def against_log(run: RunData) -> VerifiedLog | None:
+    """The log of the run ``run`` is compared with, when both logs are there as analysed
+    (the pair's figures need them), else None."""
+    return run.against if run.log is not None else None
 
 
-def _pair_series(run: RunData, against: Path, styles: dict[str, RunStyle] | None
+def _pair_series(run: RunData, against: VerifiedLog, styles: dict[str, RunStyle] | None
                  ) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     """(name, colour, t, x) of a run and of the run it is compared with, x the fastest damping
     mode's reduced coordinate (eq. 21), each log read once; each run in its report colour."""
@@ -548,12 +550,12 @@ def _pair_series(run: RunData, against: Path, styles: dict[str, RunStyle] | None
     out = []
     for name, log, color in ((run.name, run.log, st[run.name].color),
                              (other, against, st[other].color if other in st else "0.45")):
-        c = read_columns(log, ["t", "v_breve"])
+        c = log.columns(["t", "v_breve"])
         out.append((name, color, c["t"], c["v_breve"][:, axis]))
     return out
 
 
-def startup_growth(run: RunData, against: Path, path: Path,
+def startup_growth(run: RunData, against: VerifiedLog, path: Path,
                    styles: dict[str, RunStyle] | None = None) -> None:
     """The fastest damping mode's reduced coordinate (eq. 21) over the first half-second of a
     run and of the run it is compared with (top), and the size of its alternating part,
@@ -585,7 +587,7 @@ def startup_growth(run: RunData, against: Path, path: Path,
     _save(fig, path)
 
 
-def mode_psd(run: RunData, against: Path, path: Path,
+def mode_psd(run: RunData, against: VerifiedLog, path: Path,
              styles: dict[str, RunStyle] | None = None) -> None:
     """The power spectral density (Welch, SciPy) of the fastest damping mode's reduced
     coordinate over the analysis window (the second half) of a run and of the run it is

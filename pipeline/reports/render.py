@@ -5,7 +5,7 @@ Reads each ``<out>/<name>/analysis.json`` (and the log it names), then writes th
 report per analysed pair (``<name>/mechanism.{md,html}``) and ``index.html`` linking them all,
 with the claims register, baselines, benchmark and sweep pages when they exist.
 
-Rendering is skipped when the reports are current (:func:`pipeline.provenance.validity.
+Rendering is skipped when the reports are current (:func:`pipeline.store.validity.
 current_report`: the same inputs, renderer and templates as last time; ``.report-key``).
 """
 
@@ -22,37 +22,32 @@ from pipeline.analysis.record import read_analysis
 from pipeline.artefact_paths import CLAIMS_FILE
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_text, read_meta
+from pipeline.logs import atomic_write_text
 from pipeline.provenance.keys import report_version
-from pipeline.provenance.validity import REPORT_KEY_FILE, current_report, report_key
 from pipeline.reports import figures as fg
 from pipeline.reports.mechanism import mechanism_context
 from pipeline.reports.templating import render
+from pipeline.store.door import ArtefactStore
+from pipeline.store.validity import REPORT_KEY_FILE, current_report, report_key
 from pipeline.verify.cross_check import CrossCheck, build_cross_check, write_cross_check_json
 
 KEY_FILE = REPORT_KEY_FILE  # the key of the last complete rendering
 FIGURE_PROCESSES = 2
 
 
-def _log_of(record: dict) -> Path | None:
-    p = Path(record.get("log", ""))
-    return p if p.is_file() else None
-
-
 def load_runs(out: Path) -> list[fg.RunData]:
     """Every ``<out>/<run>/analysis.json``, read whole or refused (LogError naming the file and
-    the key, exit 2): a damaged record is never dropped in silence."""
+    the key, exit 2): a damaged record is never dropped in silence. Each record's log, and its
+    comparison's, through the artefact store: verified, and only the log it was made from."""
+    store = ArtefactStore()
     runs = []
     for path in sorted(Path(out).glob("*/analysis.json")):
         rec = read_analysis(path)
-        log = _log_of(rec)
-        spec: dict = {}
-        if log is not None:
-            try:
-                spec = read_meta(log).spec
-            except LogError:
-                log = None
-        runs.append(fg.RunData(rec["spec_name"], rec, log, spec, path.parent.name))
+        log = store.recorded_log(rec)
+        other = (rec.get("comparison") or {}).get("other")
+        against = store.recorded_log(other) if isinstance(other, dict) else None
+        spec = log.meta.spec if log is not None else {}
+        runs.append(fg.RunData(rec["spec_name"], rec, log, spec, path.parent.name, against))
     return runs
 
 
@@ -71,7 +66,8 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
     # One palette for the whole report: a run is drawn alike in every figure.
     styles = fg.palette([r.name for r in [*runs, *diverged]])
     if len(logged) < len(runs):
-        skipped.append("time-series figures leave out runs whose log is missing: "
+        skipped.append("time-series figures leave out runs whose analysed log is missing, "
+                       "damaged or re-run since (not the bytes the analysis read): "
                        + ", ".join(r.name for r in runs if r.log is None))
     global_figs = [
         (fg.Figure("figures/rates.png", "Bus angular rate and camera roll rate",
@@ -109,7 +105,8 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
     jobs += [(fig, draw) for fig, draw, inputs in global_figs if inputs]
     for r in diverged:
         if r.log is None:
-            skipped.append(f"growth of {r.name}: its log is missing")
+            skipped.append(f"growth of {r.name}: its analysed log is missing, damaged or "
+                           f"re-run since")
             continue
         jobs.append((fg.Figure(
             f"figures/growth_{r.folder}.png", f"Divergence of {r.name}",

@@ -20,9 +20,10 @@ from pipeline.budget import Budget, check_mission, check_sweep_size, check_sweep
 from pipeline.errors import OutputError, PipelineError, RunFailed
 from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.spec import Spec, load_spec
+from pipeline.store.locks import clear_unheld
 from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
-from pipeline.sweep.point import clear_unheld, figures, sweep_task
+from pipeline.sweep.point import figures, sweep_task
 from pipeline.sweep.progress import Progress, Tracker
 from pipeline.sweep.results import TABLE_NAME, make_table, summary_text, write_sweep_table
 

@@ -8,7 +8,7 @@ is made again, never believed).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -16,7 +16,7 @@ import pyarrow.parquet as pq
 from pipeline.analysis.record import try_read_analysis
 from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, DIRECTIONS_FILE, log_path
 from pipeline.errors import LogError
-from pipeline.logs import LogMeta, num_rows, read_meta
+from pipeline.logs import LogMeta, VerifiedLog, read_footer
 from pipeline.platform import platform_key
 from pipeline.provenance.keys import (
     ANALYSIS_LIBRARIES,
@@ -34,7 +34,8 @@ from pipeline.spec import Spec
 FINISHED = ("complete", "failed", "diverged")  # a run that ended (a failed one fails again)
 
 
-def current_log(path: Path, spec: Spec) -> LogMeta | None:
+def current_log(path: Path, spec: Spec, digest: Callable[[Path], str] = file_digest
+                ) -> LogMeta | None:
     """The log's metadata if it is a finished run of this spec (content hash), this robot
     file (content hash) and this simulator (sources and libraries), else None. A
     ``complete`` log must hold every step.
@@ -44,42 +45,42 @@ def current_log(path: Path, spec: Spec) -> LogMeta | None:
     would make within the contract's tolerances (docs/reproducibility.md), and re-simulating
     every log on every machine that reads a shared logs folder would buy nothing but churn.
     What does depend on the platform, the verdict of the pinned baselines, is keyed on it
-    (:func:`current_baselines`, and the claims through their key)."""
+    (:func:`current_baselines`, and the claims through their key). ``digest``: how the robot
+    file is hashed (the artefact store's, once per store)."""
     try:
-        meta = read_meta(path)
-        rows = num_rows(path)
+        meta, rows = read_footer(path)
     except LogError:
         return None
     if (meta.spec_hash != spec.spec_hash or meta.sim_version != sim_version()
             or meta.status not in FINISHED
-            or meta.robot_hash != file_digest(spec.robot_path)
+            or meta.robot_hash != digest(spec.robot_path)
             or (meta.status == "complete" and rows != spec.n_steps)):
         return None
     return meta
 
 
-def _made_from(record: dict, log: Path, meta: LogMeta) -> bool:
+def _made_from(record: dict, log: VerifiedLog) -> bool:
     """The record names this log, and its content: a log re-run bitwise keeps its analysis,
     a log changed in any byte does not."""
-    return (Path(str(record.get("log", ""))).resolve() == Path(log).resolve()
-            and record.get("spec_hash") == meta.spec_hash
-            and record.get("sim_version") == meta.sim_version
-            and record.get("log_sha256") == file_digest(log))
+    return (Path(str(record.get("log", ""))).resolve() == Path(log.path).resolve()
+            and record.get("spec_hash") == log.meta.spec_hash
+            and record.get("sim_version") == log.meta.sim_version
+            and record.get("log_sha256") == log.sha256)
 
 
-def current_analysis(path: Path, log: Path, meta: LogMeta,
-                     against: tuple[Path, LogMeta] | None = None) -> dict | None:
+def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None
+                     ) -> dict | None:
     """The analysis record at ``path`` if it was made from this log by this analysis code,
     compared with ``against`` exactly when one is given, else None."""
     record = try_read_analysis(path)
     if (record is None or record.get("analysis_version") != analysis_version()
-            or not _made_from(record, log, meta)):
+            or not _made_from(record, log)):
         return None
     comparison = record.get("comparison")
     if against is None:
         return record if comparison is None else None
     if not isinstance(comparison, dict) or not _made_from(comparison.get("other", {}),
-                                                          *against):
+                                                          against):
         return None
     return record
 
