@@ -84,7 +84,7 @@ analyses: runs
 report: analyses
 	$(PY) -m pipeline report --out $(REPORTS)
 
-## claims: evaluate the claims register (pipeline/specs/claims.yaml) -> generated_reports/CLAIMS.md
+## claims: evaluate the claims register (specs/claims.yaml) -> generated_reports/CLAIMS.md
 claims: $(STAMP)
 	$(PY) -m pipeline claims --claims claims --out $(REPORTS)
 
@@ -114,7 +114,7 @@ lint: $(STAMP)
 
 # The default dt sweep (claim C12): nominal, 20 s missions, dt from 0.005 to 0.04 s across
 # dt* = 2/μ_max = 0.0156 s -> $(REPORTS)/sweeps/nominal_dt/sweep.parquet. See docs/sweeps.md.
-# The bus-inertia sweep (claim C27) runs with the claims (pipeline/specs/claims.yaml, sweeps.inertia).
+# The bus-inertia sweep (claim C27) runs with the claims (specs/claims.yaml, sweeps.inertia).
 SWEEP_DTS := 0.005,0.01,0.015,0.0175,0.02,0.0225,0.025,0.03,0.04
 SWEEP_WORKERS ?= 2
 ## sweep: the default dt sweep on Dask -> generated_reports/sweeps/nominal_dt/

@@ -23,6 +23,7 @@ import os
 from dataclasses import dataclass
 
 from pipeline.errors import SpecError
+from pipeline.log_layout import ROW_SIZE
 
 STEP_SECONDS = 1.5e-4  # s per step without the target (bench: ~8e-5), with margin
 POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
@@ -31,7 +32,7 @@ POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
 # between the instants; 1.87 ms a step of 8 substeps in all), with margin.
 SUBSTEP_SECONDS = 3e-4
 HOLD_SECONDS = 5e-4
-ROW_FLOATS = 100  # the log row's width (control_step.ROW_SIZE; a test keeps them equal)
+ROW_FLOATS = ROW_SIZE  # the log row's width (pipeline/log_layout.py)
 ROW_BYTES = 3 * 8 * ROW_FLOATS
 POINT_BYTES = 7 * 8
 MAX_SWEEP_POINTS = 10_000

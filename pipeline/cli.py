@@ -197,7 +197,7 @@ def _cmd_bench(a: argparse.Namespace) -> int:
 
 
 SPEC_HELP = ("a spec name on the spec search path (beside, $BREVE_SPEC_PATH, the shipped "
-             "pipeline/specs/) or a path to a .yaml file (e.g. nominal or my/mission.yaml)")
+             "specs/) or a path to a .yaml file (e.g. nominal or my/mission.yaml)")
 
 DESCRIPTION = """\
 Simulate a free-floating space robot (a spacecraft bus carrying a 6-DoF arm with an

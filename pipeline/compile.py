@@ -50,6 +50,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import RunFailed
+from pipeline.log_layout import ROW_SIZE
 from pipeline.paths import display_path
 from pipeline.progress import interactive, say, stage
 
@@ -260,7 +261,7 @@ def _row() -> None:
     _compile(cs.read_params, _c(cs.CONTROLLER_SIZE))
     _compile(cs.read_state, _c(cs.STATE_SIZE))
     _compile(read_reference, _c(1))
-    _compile(cs.write_row, _c(cs.ROW_SIZE), _step_state(), _transform_bundle(), 1.0, 1.0, out,
+    _compile(cs.write_row, _c(ROW_SIZE), _step_state(), _transform_bundle(), 1.0, 1.0, out,
              _c(12), 1.0, 1.0, 1.0)
     _compile(commanded_force, *(_c(12, 12) for _ in range(4)), _c(12), _c(12), _c(12), 1.0)
     _compile(cs.pointing_errors, _c(3, 3), _c(3), _c(3, 3), _c(3), _c(3))

@@ -21,19 +21,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.errors import LogDamaged, LogError, OutputError, SpecError
+from pipeline.log_layout import VECTOR_COLUMNS
 from pipeline.paths import find_on_search_path
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
 from pipeline.spec import Spec, build_spec, canonical_hash
 
-VECTOR_COLUMNS = {
-    "q": 13, "v": 12, "v_c": 3, "v_breve": 9, "v_breve_des": 9, "x_tilde": 9, "u_cmd": 12,
-    "u_applied": 12,
-}
-SCALAR_COLUMNS = (
-    "t", "tau", "s_min_G", "kappa_G", "s_min_J", "kappa_J", "gamma", "dt_mu_max",
-    "pointing_err_deg", "boresight_err_deg", "com_err", "coverage", "attitude_excursion_deg",
-)
 META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "status", "rows",
              "versions")
 # Columns that may hold +inf: a condition number at an exact singularity (eq. 19). Every other

@@ -1,13 +1,14 @@
 """Where things are: the shipped specs, the user's spec search path, the kernel cache, and
 paths as a user reads them (architecture §8).
 
-The package works the same from a source checkout and installed (``pip install .``): it never
-looks for the repository. A spec name (``nominal``) or a file a spec names (``extends``,
-``robot.file``) is looked up, in order, in
+The package works the same from a source checkout and installed (``pip install .``). A spec
+name (``nominal``) or a file a spec names (``extends``, ``robot.file``) is looked up, in order,
+in
 
 1. the folder of the spec file that names it;
 2. each folder of ``BREVE_SPEC_PATH`` (``:``-separated, like ``PATH``);
-3. the specs shipped inside the package (``pipeline/specs/``).
+3. the shipped specs: the repository's ``specs/``, which an installed package carries as its
+   ``pipeline/specs/`` (package data mapped from there, pyproject.toml).
 
 Outputs (``--out``, ``logs/``) are relative to the working directory, as for any command.
 """
@@ -21,7 +22,10 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 # The folder above the package: a source checkout's root (its docs/, the tests, make). Only
 # the equation cross-check reads from it (docs/equations.md, when present).
 PROJECT_ROOT = PACKAGE_DIR.parent
-SHIPPED_SPECS = PACKAGE_DIR / "specs"
+# Installed, the package carries the specs inside it; in a source checkout they are at the top
+# of the repository, where the design card and users look for them.
+SHIPPED_SPECS = (PACKAGE_DIR / "specs" if (PACKAGE_DIR / "specs").is_dir()
+                 else PROJECT_ROOT / "specs")
 SPEC_PATH_ENV = "BREVE_SPEC_PATH"
 CACHE_ENV = "BREVE_CACHE_DIR"
 

@@ -2,7 +2,7 @@
 
 A spec is a path to a YAML file or a bare name looked up on the spec search path
 (:mod:`pipeline.paths`: the user's ``BREVE_SPEC_PATH``, then the specs shipped in
-``pipeline/specs/``). A spec may ``extends:`` another spec by name (looked up beside it first);
+``specs/``). A spec may ``extends:`` another spec by name (looked up beside it first);
 the child's keys override the parent's, mappings merging recursively. ``robot.file`` is looked
 up the same way, beside the spec first. The resolved spec is hashed canonically: the same
 content gives the same hash whatever the key order or the file it came from (the name and
@@ -61,7 +61,7 @@ class RobotSpec(_Block):
 
     file: str = "robots/seed_ur3_box.xml"
     camera_frame: str = "camera"
-    # The seed robot's inspection reach (pipeline/specs/nominal.yaml says why).
+    # The seed robot's inspection reach (specs/nominal.yaml says why).
     q_bar: list[Finite] = Field(default=[0.0, -0.367, -1.763, -0.993, -5.95, 0.0])
     damped_inverse: DampedInverse = DampedInverse()
     bus_inertia_scale: Positive = 1.0
@@ -137,7 +137,7 @@ class BaseBlock(_Block):
 
 class Limits(_Block):
     """Rate and acceleration saturations (rad/s, m/s, and per second) and the clip v_max.
-    Defaults: the seed robot's (pipeline/specs/nominal.yaml cites them)."""
+    Defaults: the seed robot's (specs/nominal.yaml cites them)."""
 
     omega_b_rate: Positive = 0.5
     omega_b_acc: Positive = 10.00466

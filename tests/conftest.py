@@ -13,12 +13,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from pipeline.paths import PROJECT_ROOT
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.spec import Spec, load_spec
+from pipeline.verify.checks_base import draw_state
 
 SEEDS = (0, 1, 2, 3, 4)
 
@@ -38,37 +38,40 @@ def robot(nominal_spec: Spec) -> GiordanoRobot:
     return GiordanoRobot(nominal_spec)
 
 
-def random_quaternion(rng: np.random.Generator) -> np.ndarray:
-    """Uniform random unit quaternion (x, y, z, w): a normalised 4-D Gaussian."""
-    q = rng.standard_normal(4)
-    return q / np.linalg.norm(q)
-
-
 def random_state(robot: GiordanoRobot, rng: np.random.Generator, spread: float = 0.5,
                  margin: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """A random (q, v): random bus pose (position within ±6 m, uniform attitude), arm joints
-    uniform within ±``spread`` rad of q̄, redrawn until σ_min(J⊕) > ``margin`` × the damped
-    floor (so J⊕ is inverted exactly), and a velocity v ~ 0.3·N(0, I) (m/s, rad/s: the
-    mission's speeds).
-    """
-    for _ in range(200):
-        q = pin.neutral(robot.model)
-        q[0:3] = rng.uniform(-6.0, 6.0, 3)
-        q[3:7] = random_quaternion(rng)
-        q[7:] = robot.q_bar + rng.uniform(-spread, spread, robot.n)
-        T = robot.terms(q, np.zeros(robot.model.nv), dynamics=False)
-        if T.s_min_J > margin * robot.floor:
-            v = 0.3 * rng.standard_normal(robot.model.nv)
-            return q, v
-    raise AssertionError("no configuration away from singularity found in 200 draws")
+    """A random (q, v) for the tests: the equation checks' draw (draw_state), over a wider
+    workspace (bus within ±6 m, arm within ±``spread`` rad of q̄) and at the mission's speeds
+    (v ~ 0.3·N(0, I))."""
+    return draw_state(robot, rng, position=6.0, spread=spread, margin=margin, speeds=0.3)
 
 
-def run_cli(*args: str, cwd: Path | None = None, timeout: float = 120
+def run_cli(*args: str | Path, cwd: Path | None = None, timeout: float = 120
             ) -> subprocess.CompletedProcess:
-    """``python -m pipeline ARGS`` in a fresh interpreter (stderr not a TTY: no progress bar)."""
+    """``python -m pipeline ARGS`` in a fresh interpreter (stderr not a TTY: no progress bar),
+    every warning an error."""
     env = dict(os.environ, PYTHONWARNINGS="error")
-    return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd or PROJECT_ROOT,
-                          capture_output=True, text=True, timeout=timeout, env=env)
+    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)],
+                          cwd=cwd or PROJECT_ROOT, capture_output=True, text=True,
+                          timeout=timeout, env=env)
+
+
+SHORT = ("short_nominal", "short_omega_ripple_dt010", "short_omega_ripple_imex")
+
+
+@pytest.fixture(scope="session")
+def short_logs(tmp_path_factory) -> dict[str, Path]:
+    """The three short missions (30 s) run once per session through run_spec into Parquet
+    logs, by spec name. Shared: a test that alters a log copies it first."""
+    from pipeline.sim.run import run_spec
+
+    out = tmp_path_factory.mktemp("short_logs")
+    logs = {}
+    for name in SHORT:
+        o = run_spec(load_spec(name), out)
+        assert o.status == "complete"
+        logs[name] = o.path
+    return logs
 
 
 def footer_metadata(path: Path) -> dict[bytes, bytes]:

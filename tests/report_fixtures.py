@@ -10,16 +10,16 @@ from __future__ import annotations
 import atexit
 import shutil
 import subprocess
-import sys
 import tempfile
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
+from conftest import run_cli as _run_cli
+
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.logs import verify_log
-from pipeline.paths import PROJECT_ROOT
 from pipeline.reports.render import render_all
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec
@@ -74,5 +74,5 @@ def built() -> Built:
 
 
 def run_cli(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)],
-                          capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=600)
+    """conftest's run_cli with a report's time (figures and the cross-check)."""
+    return _run_cli(*args, timeout=600)

@@ -15,7 +15,6 @@ from conftest import footer_metadata
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, sign_continuous
 from pipeline.analysis.linearization import simulator_map
-from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 
 N = 4000  # samples of the synthetic series; white-noise r₁ has std 1/√N ≈ 0.016
@@ -136,16 +135,6 @@ def test_regimes():
 def _analyze(*args):
     return subprocess.run([sys.executable, "-m", "pipeline", "analyze", *map(str, args)],
                           capture_output=True, text=True)
-
-
-@pytest.fixture(scope="module")
-def short_logs(tmp_path_factory):
-    out = tmp_path_factory.mktemp("logs")
-    paths = {}
-    for name in ("short_nominal", "short_omega_ripple_dt010"):
-        spec = with_overrides(load_spec(name), {"mission.duration": 4.0})
-        paths[name] = run_spec(spec, out).path
-    return paths
 
 
 def test_analyze_writes_json_and_table(short_logs, tmp_path):

@@ -372,7 +372,7 @@ def test_a_note_metric_without_a_note_file_is_refused(tmp_path):
 
 
 def test_the_shipped_note_publishes_the_issue_values():
-    """The seed note's numbers as issue 11 lists them, read from pipeline/specs/seed_note.yaml."""
+    """The seed note's numbers as issue 11 lists them, read from specs/seed_note.yaml."""
     from pipeline.claims.seed_note import load_note
 
     note = load_note(SHIPPED_SPECS / "seed_note.yaml")

@@ -9,13 +9,12 @@ import shutil
 import numpy as np
 import pytest
 
+from pipeline.log_layout import ROW_FIELDS, ROW_SIZE
 from pipeline.sim import jit as jit_mod
 from pipeline.sim.base_guidance import REFERENCE_FIELDS, read_reference
 from pipeline.sim.control_step import (
     CONTROLLER_FIELDS,
     ROW,
-    ROW_FIELDS,
-    ROW_SIZE,
     STATE_FIELDS,
     controller_step,
     read_params,
@@ -33,8 +32,7 @@ def mission() -> Mission:
 
 
 def test_layouts_have_unique_names_and_cover_the_log():
-    from pipeline.logs import SCALAR_COLUMNS, VECTOR_COLUMNS
-    from pipeline.sim.limits import LIMIT_FLAGS
+    from pipeline.log_layout import LIMIT_FLAGS, SCALAR_COLUMNS, VECTOR_COLUMNS
 
     for fields in (STATE_FIELDS, ROW_FIELDS, CONTROLLER_FIELDS, REFERENCE_FIELDS):
         names = [n for n, _ in fields]

@@ -68,8 +68,8 @@ def test_the_cycle_finder_finds_a_cycle():
 # only units of its own layer or below. Data flows up: sim writes logs, analysis reads them,
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
-    ("errors", "paths", "artefact_paths", "yamlfile", "version", "progress", "provenance",
-     "platform"),
+    ("errors", "paths", "artefact_paths", "log_layout", "yamlfile", "version", "progress",
+     "provenance", "platform"),
     ("spec", "budget"),
     ("logs",),
     ("sim",),
@@ -161,3 +161,16 @@ def test_the_door_check_sees_an_offender(tmp_path, monkeypatch):
     f = tmp_path / "x.py"
     f.write_text("def f():\n    from pipeline.logs import read_columns\n")
     assert ("pipeline.logs", "read_columns") in _imported_names(f)
+
+
+def test_the_packages_pyproject_lists_are_the_package_folders():
+    """pyproject.toml lists the packages (the shipped specs/ mapped in as pipeline.specs): a new
+    package folder missing from the list would be missing from an installed copy."""
+    import tomllib
+
+    cfg = tomllib.loads((PROJECT_ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    folders = {_module(p.parent / "__init__.py") for p in PKG.rglob("__init__.py")
+               if "__pycache__" not in p.parts}
+    assert set(cfg["packages"]) == folders | {"pipeline.specs"}
+    assert cfg["package-dir"] == {"pipeline.specs": "specs"}
+    assert (PROJECT_ROOT / "specs" / "nominal.yaml").is_file()

@@ -179,10 +179,8 @@ def _reduced_inertia_fd(robot, q):
 
 
 @pytest.fixture(scope="module")
-def short_nominal_log(tmp_path_factory):
-    out = run_spec(load_spec("short_nominal"), tmp_path_factory.mktemp("seed"))
-    assert out.status == "complete"
-    return out.path
+def short_nominal_log(short_logs):
+    return short_logs["short_nominal"]
 
 
 def test_reduced_inertia_at_the_representative_step_matches_the_kinetic_energy(

@@ -18,11 +18,12 @@ import pytest
 from conftest import SEEDS, run_cli
 
 from pipeline.errors import LogError, OutputError, RunFailed
+from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import num_rows, read_columns, read_meta
 from pipeline.paths import PROJECT_ROOT
 from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_guidance import BaseGuidance
-from pipeline.sim.limits import LIMIT_FLAGS, saturate
+from pipeline.sim.limits import saturate
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.robot_file import robot_card
@@ -30,7 +31,6 @@ from pipeline.sim.run import run_spec
 from pipeline.sim.target import build_target, visible
 from pipeline.spec import Camera, Limits, Target, load_spec, with_overrides
 
-SHORT = ("short_nominal", "short_omega_ripple_dt010", "short_omega_ripple_imex")
 BLOCKS = ("omega_b", "nu_e_lin", "nu_e_ang")  # the v̆ blocks, in order
 FREE = np.full(3, 1e9)  # per-block bounds too large to bind
 
@@ -202,18 +202,6 @@ def test_same_spec_twice_is_bitwise_identical():
 
 
 # -- the log written by run_spec ---------------------------------------------------------------
-
-@pytest.fixture(scope="module")
-def short_logs(tmp_path_factory):
-    """The three short missions (30 s) run once through run_spec into Parquet logs."""
-    out = tmp_path_factory.mktemp("logs")
-    logs = {}
-    for name in SHORT:
-        o = run_spec(load_spec(name), out)
-        assert o.status == "complete"
-        logs[name] = o.path
-    return logs
-
 
 REQUIRED = {"step": None, "t": None, "q": 13, "v": 12, "v_c": 3, "v_breve": 9, "s_min_G": None,
             "kappa_G": None, "s_min_J": None, "kappa_J": None, "gamma": None, "dt_mu_max": None,

@@ -301,8 +301,11 @@ def test_spec_is_immutable():
         s.mission.dt = 0.5  # type: ignore[misc]
 
 
-def test_shipped_specs_live_in_the_package():
-    assert SHIPPED_SPECS == PROJECT_ROOT / "pipeline" / "specs"
+def test_shipped_specs_live_at_the_top_of_the_repository():
+    """specs/ at the checkout's root, as the design card says (an installed package carries
+    them inside it, tests/test_install.py)."""
+    assert SHIPPED_SPECS == PROJECT_ROOT / "specs"
+    assert not (PROJECT_ROOT / "pipeline" / "specs").exists()
     assert load_spec("nominal").robot_path == SHIPPED_SPECS / "robots" / "seed_ur3_box.xml"
 
 

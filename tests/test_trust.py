@@ -20,7 +20,8 @@ from conftest import footer_metadata, run_cli
 from pipeline.analysis.stages import analyze_log
 from pipeline.claims.baselines import compare_logs
 from pipeline.errors import LogDamaged
-from pipeline.logs import MAY_BE_INFINITE, VECTOR_COLUMNS, read_meta, verify_log
+from pipeline.log_layout import VECTOR_COLUMNS
+from pipeline.logs import MAY_BE_INFINITE, read_meta, verify_log
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 
@@ -297,9 +298,11 @@ def test_a_sweep_of_a_million_points_is_refused_before_its_grid_is_built(tmp_pat
 
 def test_the_budget_row_width_is_the_logs():
     from pipeline.budget import ROW_FLOATS
-    from pipeline.sim.control_step import ROW_SIZE
+    from pipeline.sim.control_step import ROW
 
-    assert ROW_FLOATS == ROW_SIZE
+    # the kernel's row ends where the budget says a row does, and the fields tile it
+    assert ROW_FLOATS == max(sl.stop for sl in ROW.values())
+    assert sum(sl.stop - sl.start for sl in ROW.values()) == ROW_FLOATS
 
 
 def test_budget_overrides_are_validated(monkeypatch):

@@ -18,10 +18,10 @@ from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm
 from pipeline.errors import CheckFailed, LogError, SpecError
+from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
 from pipeline.sim.base_controller import block_gains, conditioning_scale
-from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import BUS_YAW_AXIS, damping_modes, mode_fixes

@@ -1,6 +1,6 @@
 """Pinned baseline logs: ``python -m pipeline.claims.baselines {check,repin,tolerances}``.
 
-The baselines are the specs ``pipeline/specs/baseline_*.yaml`` (short missions), pinned as
+The baselines are the specs ``specs/baseline_*.yaml`` (short missions), pinned as
 ``logs/baselines/<name>/run.parquet``. ``check`` re-runs each into a temporary folder and
 compares every logged column of the new log with the pinned one, array against array (the
 metadata differs by design: it holds the code version), under the reproducibility contract

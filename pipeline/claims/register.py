@@ -1,4 +1,4 @@
-"""The claims register file (``pipeline/specs/claims.yaml``): schema, ``extends`` and validation.
+"""The claims register file (``specs/claims.yaml``): schema, ``extends`` and validation.
 
     logs: logs                       # where runs are written (relative to the project root)
     runs:                            # run names used in metric paths

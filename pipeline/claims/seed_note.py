@@ -1,4 +1,4 @@
-"""The seed note's published evidence (``pipeline/specs/seed_note.yaml``) beside ours.
+"""The seed note's published evidence (``specs/seed_note.yaml``) beside ours.
 
 The note's numbers are data, read and validated here; each row pairs a value the note prints
 with the path of our value in a run's analysis.json. :func:`note_table` lays them side by side

@@ -17,12 +17,12 @@ from collections import namedtuple
 
 import numpy as np
 
+from pipeline.log_layout import ROW_FIELDS
 from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_guidance import read_reference
 from pipeline.sim.com_controller import com_update
 from pipeline.sim.jit import jit
 from pipeline.sim.layout import field_places, offsets
-from pipeline.sim.limits import LIMIT_FLAGS
 from pipeline.sim.linalg import dot, matvec
 from pipeline.sim.plant import commanded_force
 from pipeline.sim.rotations import attitude_error
@@ -38,14 +38,9 @@ STATE = offsets(STATE_FIELDS)
 STATE_SIZE = sum(n for _, n in STATE_FIELDS)
 STATE_AT = field_places("StatePlaces", STATE_FIELDS)
 
-# One log row (architecture §6), written by the kernel; the mission fills ``t`` and ``step``.
-ROW_FIELDS = (("tau", 1), ("q", 13), ("v", 12), ("v_c", 3), ("v_breve", 9), ("v_breve_des", 9),
-              ("x_tilde", 9), ("u_cmd", 12), ("u_applied", 12), ("s_min_G", 1), ("kappa_G", 1),
-              ("s_min_J", 1), ("kappa_J", 1), ("gamma", 1), ("dt_mu_max", 1),
-              ("pointing_err_deg", 1), ("boresight_err_deg", 1), ("com_err", 1), ("coverage", 1),
-              ("attitude_excursion_deg", 1), *((f, 1) for f in LIMIT_FLAGS))
+# One log row (architecture §6, pipeline/log_layout.py), written by the kernel; the mission
+# fills ``t`` and ``step``.
 ROW = offsets(ROW_FIELDS)
-ROW_SIZE = sum(n for _, n in ROW_FIELDS)
 ROW_AT = field_places("RowPlaces", ROW_FIELDS)
 
 # The controller's parameters, from the spec and the robot (see ``controller_vector``): the

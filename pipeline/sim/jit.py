@@ -36,12 +36,15 @@ from numba.core import config
 from pipeline.paths import source_checkout, user_cache_dir
 
 SIM_DIR = Path(__file__).resolve().parent
+# A file outside this folder whose constants the kernels freeze: the log row's layout.
+KERNEL_CONSTANTS = (SIM_DIR.parent / "log_layout.py",)
 
 
 def source_stamp(directory: Path = SIM_DIR) -> str:
-    """SHA-256 (first 12 hex digits) over the ``*.py`` files of ``directory``, by name."""
+    """SHA-256 (first 12 hex digits) over the ``*.py`` files of ``directory`` and the files
+    of ``KERNEL_CONSTANTS``, by name."""
     h = hashlib.sha256()
-    for p in sorted(Path(directory).glob("*.py")):
+    for p in [*sorted(Path(directory).glob("*.py")), *KERNEL_CONSTANTS]:
         h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()[:12]
 

@@ -7,16 +7,14 @@ import math
 
 import numpy as np
 
+from pipeline.log_layout import BREVE_BLOCK_NAMES
 from pipeline.sim.jit import jit
 from pipeline.sim.linalg import dot
 from pipeline.spec import Limits
 
 # Blocks of v̆ = [ω_b; ν_e,lin; ν_e,ang] and the limit names that bound each.
-BREVE_BLOCKS = (("omega_b", slice(0, 3)), ("nu_e_lin", slice(3, 6)), ("nu_e_ang", slice(6, 9)))
-LIMIT_FLAGS = tuple(
-    [f"sat_{name}_{kind}" for name, _ in BREVE_BLOCKS for kind in ("acc", "rate")]
-    + ["sat_v_c_acc", "sat_v_c_rate", "sat_v_max"]
-)
+# (The names and the flags are the log's, pipeline/log_layout.py.)
+BREVE_BLOCKS = tuple((name, slice(3 * i, 3 * i + 3)) for i, name in enumerate(BREVE_BLOCK_NAMES))
 
 
 @jit

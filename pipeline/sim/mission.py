@@ -24,14 +24,14 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from pipeline.logs import ROW_GROUP, SCALAR_COLUMNS, VECTOR_COLUMNS, concat_columns
+from pipeline.log_layout import LIMIT_FLAGS, ROW_SIZE, SCALAR_COLUMNS, VECTOR_COLUMNS
+from pipeline.logs import ROW_GROUP, concat_columns
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
 from pipeline.sim.breve_controller import damping_rates
 from pipeline.sim.control_step import (
     CONTROLLER_FIELDS,
     ROW,
-    ROW_SIZE,
     STATE,
     STATE_FIELDS,
     TaskErrors,
@@ -39,7 +39,7 @@ from pipeline.sim.control_step import (
     task_error_terms,
 )
 from pipeline.sim.layout import pack
-from pipeline.sim.limits import LIMIT_FLAGS, breve_bounds
+from pipeline.sim.limits import breve_bounds
 from pipeline.sim.linalg import matvec
 from pipeline.sim.plant import (
     attitude_excursion,

@@ -156,20 +156,32 @@ def rng(salt: int = 0) -> np.random.Generator:
 
 
 def random_state(salt: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """A random (q, v): bus pose within ±2 m, random attitude, arm within ±0.3 rad of q̄,
-    redrawn until σ_min(J⊕) is at least twice the damped floor (so Γ⁻¹ is exact)."""
+    """A random (q, v) of the checks' robot (:func:`draw_state` with its defaults)."""
+    return draw_state(robot(), rng(salt))
+
+
+# The speeds of a random state's velocity: bus linear (m/s), bus angular, arm joints (rad/s).
+STATE_SPEEDS = np.r_[0.1 * np.ones(3), 0.2 * np.ones(3), 0.5 * np.ones(6)]
+
+
+def draw_state(robot, g: np.random.Generator, position: float = 2.0, spread: float = 0.3,
+               margin: float = 2.0, speeds: np.ndarray | float = STATE_SPEEDS
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """A random (q, v): bus position within ±``position`` m, uniform attitude (a normalised
+    4-D Gaussian), arm joints within ±``spread`` rad of q̄, redrawn until σ_min(J⊕) is at
+    least ``margin`` × the damped floor (so Γ⁻¹ is exact); v ~ ``speeds``·N(0, I). The one
+    random-state draw of the equation checks and the tests."""
     import pinocchio as pin
 
-    r, g = robot(), rng(salt)
     for _ in range(100):
         quat = g.standard_normal(4)
         quat /= np.linalg.norm(quat)
-        q = np.concatenate([g.uniform(-2, 2, 3), quat, r.q_bar + g.uniform(-0.3, 0.3, 6)])
-        T = r.terms(q, np.zeros(r.model.nv), dynamics=False)
-        if T.s_min_J > 2 * r.floor:
-            v = g.standard_normal(r.model.nv) * np.r_[0.1 * np.ones(3), 0.2 * np.ones(3),
-                                                      0.5 * np.ones(6)]
-            return pin.normalize(r.model, q), v
+        q = np.concatenate([g.uniform(-position, position, 3), quat,
+                            robot.q_bar + g.uniform(-spread, spread, robot.n)])
+        T = robot.terms(q, np.zeros(robot.model.nv), dynamics=False)
+        if T.s_min_J > margin * robot.floor:
+            v = g.standard_normal(robot.model.nv) * speeds
+            return pin.normalize(robot.model, q), v
     raise RuntimeError("no well-conditioned random state found in 100 draws")
 
 
