@@ -49,7 +49,7 @@ from pipeline.logs import atomic_write_text, file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
-from pipeline.spec import Spec, canonical_hash, load_spec, with_overrides
+from pipeline.spec import Spec, load_spec, spec_hash_of, with_overrides
 from pipeline.store.door import ArtefactStore
 from pipeline.sweep.throughput import sweep_throughput
 
@@ -144,9 +144,8 @@ def tiled_log(src: Path, dst: Path, factor: int) -> Path:
     # The metadata says what the file is, so the log passes verify_log: a mission `factor`
     # times as long (its spec re-hashed), with every row counted.
     spec["mission"]["duration"] = spec["mission"]["duration"] * factor
-    content = {k: v for k, v in spec.items() if k not in ("name", "description")}
     md.update({b"pipeline.spec": json.dumps(spec, sort_keys=True).encode(),
-               b"pipeline.spec_hash": canonical_hash(content).encode(),
+               b"pipeline.spec_hash": spec_hash_of(spec).encode(),
                b"pipeline.rows": str(n * factor).encode()})
     dst.parent.mkdir(parents=True, exist_ok=True)
     with pq.ParquetWriter(dst, pf.schema_arrow.with_metadata(md), compression="zstd") as w:

@@ -25,7 +25,7 @@ from pipeline.log_layout import VECTOR_COLUMNS
 from pipeline.paths import find_on_search_path
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
-from pipeline.spec import Spec, build_spec, canonical_hash
+from pipeline.spec import Spec, build_spec, canonical_hash, spec_hash_of
 
 META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "status", "rows",
              "versions")
@@ -420,13 +420,16 @@ def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
 
 def _verified_spec(path: Path, meta: LogMeta, n: int) -> Spec:
     """The spec the metadata records, checked against its hash, and the row count against
-    the status."""
+    the status. A log written before the inert fields left the spec hash
+    (``pipeline.spec.INERT_FIELDS``) records the hash of all its content: that is as good a
+    check of its metadata, so it is accepted too."""
     content = {k: v for k, v in meta.spec.items() if k not in ("name", "description")}
     try:
-        digest = canonical_hash(content)
+        digest = spec_hash_of(content)
+        whole = canonical_hash(content)
     except (TypeError, ValueError):
         raise _damaged(path, "spec hash", "the metadata spec is not canonical JSON") from None
-    if digest != meta.spec_hash:
+    if meta.spec_hash not in (digest, whole):
         raise _damaged(path, "spec hash", f"the metadata spec hashes to {digest[:12]}…, the "
                        f"log records {meta.spec_hash[:12]}…")
     try:

@@ -242,11 +242,30 @@ class Spec(_Block):
 
     @property
     def spec_hash(self) -> str:
-        return canonical_hash(self.content())
+        return spec_hash_of(self.content())
 
     @property
     def n_steps(self) -> int:
         return round(self.mission.duration / self.mission.dt)
+
+
+# Fields a spec carries (the precursor's config_sampling block has them, DESIGN.md) that change
+# nothing a run computes: the controller's ramp is controller.base.conditioning, and these are
+# only Sampling.scale_by_svd's defaults when it is called without a ramp, which no run does.
+# They do not enter the spec hash, so editing them re-simulates nothing (tests/test_spec.py
+# runs a mission with other values and gets the same log, bit for bit).
+INERT_FIELDS = (("config_sampling", "low"), ("config_sampling", "high"),
+                ("config_sampling", "floor"))
+
+
+def spec_hash_of(content: dict[str, Any]) -> str:
+    """The spec hash of a spec's content (a resolved spec as JSON): the canonical hash of all
+    of it but its name, its description and the ``INERT_FIELDS``."""
+    d = {k: v for k, v in content.items() if k not in ("name", "description")}
+    for block, key in INERT_FIELDS:
+        if isinstance(d.get(block), dict):
+            d[block] = {k: v for k, v in d[block].items() if k != key}
+    return canonical_hash(d)
 
 
 def canonical_hash(obj: Any) -> str:

@@ -383,3 +383,19 @@ def test_a_window_start_that_is_not_a_time_is_exit_2(log, tmp_path, value):
     assert r.returncode == 2, r.stderr
     assert "window" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_log_hashed_before_the_inert_fields_left_the_hash_still_verifies(log, tmp_path):
+    """A log written when the spec hash covered every field (config_sampling.low/high/floor
+    included) is whole, not damaged; a hash of neither form is still refused."""
+    from pipeline.spec import canonical_hash
+
+    content = {k: v for k, v in read_meta(log).spec.items() if k not in ("name", "description")}
+    legacy = canonical_hash(content)
+    assert legacy != read_meta(log).spec_hash  # the two forms differ
+    old = _rewrite(log, tmp_path / "old" / "run.parquet", meta={"pipeline.spec_hash": legacy})
+    assert verify_log(old).meta.spec_hash == legacy
+    bad = _rewrite(log, tmp_path / "bad" / "run.parquet",
+                   meta={"pipeline.spec_hash": canonical_hash({**content, "x": 1})})
+    with pytest.raises(LogDamaged, match="spec hash"):
+        verify_log(bad)
