@@ -62,6 +62,11 @@ def test_a_threshold_the_data_cannot_meet_fails_and_names_the_claim(tmp_path):
      "unknown key"),
     ({"metric": "sweep:nope.holds", "op": "eq", "threshold": True},
      "unknown metric path 'sweep:nope.holds'"),
+    # paths into the analysis record, checked against its schema when the register loads
+    ({"metric": "nominal:dominant.lagg1", "op": "lt", "threshold": 0}, "no field 'lagg1'"),
+    ({"metric": "nominal:theory.fastest_mode.axes", "op": "eq", "threshold": 2},
+     "no field 'axes'"),
+    ({"metric": "nominal:directions.x.lag1", "op": "lt", "threshold": 0}, "no field 'x'"),
 ])
 def test_bad_claims_files_are_one_line_errors_before_any_run(tmp_path, check, needle):
     path = claims_file(tmp_path, [{"id": "B1", "statement": "s", "expect": "hold",

@@ -181,6 +181,15 @@ def analysed(log, tmp_path_factory) -> Path:
     return out
 
 
+def _set(record: dict, path: tuple[str, ...], value) -> dict:
+    """The record with the field at ``path`` set to ``value`` (a damage by hand)."""
+    node = record
+    for part in path[:-1]:
+        node = node[part]
+    node[path[-1]] = value
+    return record
+
+
 def _copy_reports(src: Path, dst: Path) -> Path:
     import shutil
 
@@ -193,7 +202,11 @@ def _copy_reports(src: Path, dst: Path) -> Path:
     (lambda p: p.write_text(json.dumps({**json.loads(p.read_text()), "schema": "v0"})),
      "key schema"),
     (lambda p: p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items()
-                                        if k != "theory"})), "key theory missing"),
+                                        if k != "theory"})), "key theory: missing"),
+    (lambda p: p.write_text(json.dumps(_set(json.loads(p.read_text()), ("dominant", "lag1"),
+                                            "-0.99"))), "key dominant.lag1: '-0.99' is not a"),
+    (lambda p: p.write_text(json.dumps(_set(json.loads(p.read_text()), ("theory", "mu_max2"),
+                                            1.0))), "key theory.mu_max2: not a field"),
     (lambda p: (p.parent / "directions.parquet").unlink(), "directions.parquet is missing"),
     (lambda p: (p.parent / "directions.parquet").write_bytes(b"PAR1 another table"),
      "key directions_sha256"),

@@ -1,8 +1,10 @@
 """The analysis record on disk: ``<out>/<run>/analysis.json`` and ``directions.parquet``, a
 pair written as a set and read back only when whole (architecture §3, §6).
 
-``analysis.json`` carries a schema version (:data:`SCHEMA`); a reader refuses a version it
-does not know, a file that is not JSON, and a record missing a stage. It also carries the
+``analysis.json`` carries a schema version (:data:`SCHEMA`); its fields and their types are
+:mod:`pipeline.analysis.schema`'s, checked when it is written and when it is read: a reader
+refuses a version it does not know, a file that is not JSON, and a record missing a field,
+holding one it should not or one of the wrong type. It also carries the
 SHA-256 of the ``directions.parquet`` written with it: the table is written first and the
 record last, so a record whose table is missing or is another run's is caught on reading
 (a writer killed between the two, a disk that filled up).
@@ -19,6 +21,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.analysis.schema import check_record
 from pipeline.artefact_paths import ANALYSIS_FILE, DIRECTIONS_FILE
 from pipeline.errors import LogError
 from pipeline.logs import atomic_write_bytes, atomic_write_text
@@ -30,14 +33,6 @@ from pipeline.logs import atomic_write_bytes, atomic_write_text
 SCHEMA = "breve-analysis/4"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
-# The stages every record of a complete log holds, and those of a diverged log's record.
-STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version", "analysis_version",
-          "integrator", "dt", "n_steps", "window", "provenance", "directions", "dominant",
-          "theory", "alignment", "velocity_jump", "bus_rate", "metrics", "harm", "robot",
-          "bus_mode", "mu_max_log", "modes_along")
-DIVERGED_STAGES = ("spec_name", "log", "log_sha256", "spec_hash", "sim_version",
-                   "analysis_version", "integrator", "dt", "n_steps", "status", "diverged_step",
-                   "provenance", "divergence", "theory", "robot")
 
 
 def _table_bytes(record: dict) -> bytes:
@@ -56,6 +51,10 @@ def write_analysis(record: dict, out_dir: Path) -> Path:
     folder = Path(out_dir) / record["spec_name"]
     table_path, path = folder / TABLE_NAME, folder / RECORD_NAME
     record = {"schema": SCHEMA, **{k: v for k, v in record.items() if k != "schema"}}
+    problem = check_record({**record, "directions_sha256": None})  # (its value comes below)
+    if problem is not None:  # the analysis code's own error: never written, never read back
+        raise ValueError(f"analysis record of {record.get('spec_name')} off its schema: "
+                         f"{problem}")
     if record.get("directions"):
         data = _table_bytes(record)
         record["directions_sha256"] = hashlib.sha256(data).hexdigest()
@@ -86,10 +85,9 @@ def read_analysis(path: Path | str) -> dict:
     if schema != SCHEMA:
         raise LogError(f"{path}: key schema: {schema!r} is not a version this code reads "
                        f"({SCHEMA})")
-    stages = DIVERGED_STAGES if record.get("status") == "diverged" else STAGES
-    for key in stages:
-        if key not in record:
-            raise LogError(f"{path}: key {key} missing (a stage of the analysis)")
+    problem = check_record(record)  # every field of its kind, typed (analysis/schema.py)
+    if problem is not None:
+        raise LogError(f"{path}: key {problem} (not the analysis record {SCHEMA})")
     digest = record.get("directions_sha256")
     table = path.parent / TABLE_NAME
     if digest is not None:

@@ -17,6 +17,7 @@ import numpy as np
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm
+from pipeline.analysis.schema import value_at
 from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import VerifiedLog
@@ -467,12 +468,6 @@ COMPARE_ROWS = (
 )
 
 
-def dig(record: dict, path: tuple[str, ...]):
-    for p in path:
-        record = record[p]
-    return record
-
-
 def compare(a: dict, b: dict) -> dict:
     """Stage 7: the two runs side by side, the lag-1 flip and the amplitude ratio."""
     la, lb = a["dominant"]["lag1"], b["dominant"]["lag1"]
@@ -483,7 +478,7 @@ def compare(a: dict, b: dict) -> dict:
         "amplitude_ratio": a["velocity_jump"]["median"] / b["velocity_jump"]["median"],
         "coverage_diff_pp": 100 * abs(a["metrics"]["coverage_final"]
                                       - b["metrics"]["coverage_final"]),
-        "table": [{"quantity": label, a["spec_name"]: dig(a, p), b["spec_name"]: dig(b, p)}
-                  for label, p in COMPARE_ROWS],
+        "table": [{"quantity": label, a["spec_name"]: value_at(a, p),
+                   b["spec_name"]: value_at(b, p)} for label, p in COMPARE_ROWS],
         "other": b,
     }

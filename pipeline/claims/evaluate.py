@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pipeline.analysis.schema import value_at
 from pipeline.analysis.signals import lag1_autocorrelation
 from pipeline.artefact_paths import log_path
 from pipeline.claims.record import CheckEval, ClaimEval, read_claims_json, write_claims_json
@@ -58,16 +59,11 @@ def log_statistic(run: StoredRun, start: int, group: str, stat: str) -> float:
 
 
 def dig(obj: Any, path: str, what: str) -> Any:
-    """Follow a dotted path through mappings and lists; a missing key is a SpecError."""
-    for part in path.split("."):
-        if isinstance(obj, dict) and part in obj:
-            obj = obj[part]
-        elif isinstance(obj, list) and part.lstrip("-").isdigit() and -len(obj) <= int(
-                part) < len(obj):
-            obj = obj[int(part)]
-        else:
-            raise SpecError(f"no key {part!r} in {what}")
-    return obj
+    """:func:`pipeline.analysis.schema.value_at`, a missing key a SpecError naming ``what``."""
+    try:
+        return value_at(obj, path)
+    except KeyError as exc:
+        raise SpecError(f"no key {exc.args[0]!r} in {what}") from None
 
 
 class Context:

@@ -218,6 +218,8 @@ def validate(cf: ClaimsFile, path: Path) -> None:
                                     f"{source!r} (one of {sources})")
                 if source in cf.runs and mpath.startswith("log."):
                     _check_log_path(metric, mpath, where)
+                elif source in cf.runs and not mpath.startswith("spec."):
+                    _check_record_path(metric, mpath, cf.runs[source].expect, where)
                 if source == "note":
                     _check_note_path(cf, path, metric, mpath, where)
                 if source == "sweep" and mpath.split(".")[0] not in cf.sweeps:
@@ -247,6 +249,19 @@ def _check_log_path(metric: str, mpath: str, where: str) -> None:
         raise SpecError(f"{where}: unknown metric path {metric!r}: log statistics are "
                         f"log.GROUP.STAT with GROUP in {', '.join(LOG_GROUPS)} and STAT in "
                         f"{', '.join(LOG_STATS)}")
+
+
+def _check_record_path(metric: str, mpath: str, expect: str, where: str) -> None:
+    """A path into a run's analysis record names a field of the record of its kind (a
+    diverged run's, else a complete run's: pipeline/analysis/schema.py)."""
+    from pipeline.analysis.schema import CompleteRecord, DivergedRecord, field_type
+
+    kind = DivergedRecord if expect == "diverged" else CompleteRecord
+    try:
+        field_type(mpath, kind)
+    except KeyError as exc:
+        raise SpecError(f"{where}: unknown metric path {metric!r}: no field {exc.args[0]!r} "
+                        f"there in the analysis record of a {expect} run") from None
 
 
 def _metrics(cf: ClaimsFile) -> list[tuple[str, str]]:

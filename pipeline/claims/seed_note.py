@@ -18,6 +18,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from pipeline.analysis.schema import value_at
 from pipeline.errors import SpecError
 from pipeline.paths import SHIPPED_SPECS
 from pipeline.yamlfile import read_yaml
@@ -82,12 +83,12 @@ def load_note(path: Path | str) -> SeedNote:
     return note
 
 
-def _dig(record: dict, path: str) -> float | None:
-    node = record
-    for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return None
-        node = node[part]
+def _number_at(record: dict, path: str) -> float | None:
+    """Our number at ``path`` of a record, or None where the record has none."""
+    try:
+        node = value_at(record, path)
+    except KeyError:
+        return None
     return float(node) if isinstance(node, int | float) and not isinstance(node, bool) else None
 
 
@@ -183,8 +184,9 @@ def note_table(note: SeedNote, records: dict[str, dict],
         cells = []
         for col in COLUMNS:
             rec = records.get(col)
-            ours = _dig(rec, r.ours) if rec else None
-            also = tuple((label, _dig(rec, p) if rec else None) for label, p in r.also.items())
+            ours = _number_at(rec, r.ours) if rec else None
+            also = tuple((label, _number_at(rec, p) if rec else None)
+                         for label, p in r.also.items())
             j = judgement(claims, r.key, col, r.ours) if claims and rec else None
             cells.append(Cell(col, getattr(r, col), ours, also, r.roundoff, j))
         out.append(TableRow(r.key, r.row, r.ours_label, tuple(cells)))

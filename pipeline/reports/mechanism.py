@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.analysis.stages import dig
+from pipeline.analysis.schema import value_at
 from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
 from pipeline.reports.templating import num
@@ -100,8 +100,8 @@ def harm_table(rec: dict, other: dict) -> list[dict]:
     """Section 7's rows for the pair: each quantity of ``HARM_ROWS``, formatted, with the
     channel it was measured on."""
     def cell(r: dict, path, channel) -> str:
-        value = num(dig(r, path))
-        return f"{value} ({dig(r, channel)})" if channel else value
+        value = num(value_at(r, path))
+        return f"{value} ({value_at(r, channel)})" if channel else value
 
     return [{"quantity": f"{label} ({unit})" if unit else label,
              "a": cell(rec, path, channel), "b": cell(other, path, channel)}

@@ -21,7 +21,12 @@ from pipeline.errors import OutputError, PipelineError, RunFailed
 from pipeline.provenance.keys import analysis_version, sim_version
 from pipeline.spec import Spec, load_spec
 from pipeline.store.locks import clear_unheld
-from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
+from pipeline.sweep.cluster import (
+    ALLOWED_FAILURES,
+    WORKER_TIMEOUT,
+    ClusterOptions,
+    open_client,
+)
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
 from pipeline.sweep.point import figures, sweep_task
 from pipeline.sweep.progress import Progress, Tracker
@@ -141,7 +146,8 @@ def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float 
     """Submit one task per point and collect the records as they complete (grid order).
 
     Each record gets ``attempts``, the starts of its task that the driver saw (more than
-    one: a worker died or retired under it and Dask ran it again)."""
+    one: a worker died or retired under it and Dask ran it again), and for a task the
+    scheduler gave up on (KilledWorker) the starts its rule implies."""
     from distributed import as_completed
 
     tag = uuid.uuid4().hex[:8]
@@ -176,7 +182,12 @@ def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float 
         with suppress(Exception):
             client.unsubscribe_topic(topic)
     for p in sweep.points:
-        records[p.name]["attempts"] = tracker.attempts(p.name)
+        # The starts the driver saw; a start announced by a worker killed at once may never
+        # arrive (under load). A KilledWorker is the scheduler's own count: the task's worker
+        # died ALLOWED_FAILURES + 1 times, so it started that often.
+        seen = tracker.attempts(p.name)
+        killed = str(records[p.name].get("error", "")).startswith("KilledWorker")
+        records[p.name]["attempts"] = max(seen, ALLOWED_FAILURES + 1) if killed else seen
     return [records[p.name] for p in sweep.points]
 
 

@@ -1,0 +1,467 @@
+"""The analysis record's fields and types (``analysis.json``, schema ``breve-analysis/4``).
+
+One typed description of the record, two uses:
+
+- :func:`check_record`: a record read from disk holds every field its kind (a complete or a
+  diverged log) must hold, with the type it must have, and no other (a LogError naming the
+  file and the field otherwise);
+- :func:`field_type`: whether a dotted path names a field of the record (``dominant.lag1``,
+  ``theory.fastest_mode.axis``, ``directions.0.lag1``), and the field's type: the claims
+  register's paths are checked against it when the register is loaded, not when a claim is
+  evaluated.
+
+A field typed ``dict[str, float]`` (keyed by a name the data decides, such as a mode's) takes
+any key. Numbers: an ``int`` is a ``float`` field's value too (JSON does not keep the
+difference), a ``bool`` is not a number; NaN and ±inf are floats.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass
+from typing import Any, Union
+
+
+@dataclass(frozen=True)
+class Complex:
+    real: float
+    imag: float
+
+
+@dataclass(frozen=True)
+class Window:
+    start_step: int
+    stop_step: int
+    rule: str
+
+
+@dataclass(frozen=True)
+class Provenance:
+    max_abs_s_min_G: float
+    worst_step: int
+    max_rel_kappa_G: float
+    tolerance: float
+
+
+@dataclass(frozen=True)
+class Direction:
+    direction: int
+    sigma: float
+    rms: float
+    step_rms: float
+    lag1: float
+
+
+@dataclass(frozen=True)
+class Dominant:
+    index: int
+    sigma: float
+    lag1: float
+    step_rms: float
+    step_energy_share: float
+
+
+@dataclass(frozen=True)
+class NoteOrder:
+    rule: str
+    eig_dominant: Complex
+    spectral_radius: float
+
+
+@dataclass(frozen=True)
+class Eigenvalues:
+    real: list[float]
+    imag: list[float]
+
+
+@dataclass(frozen=True)
+class MapSpectrum:
+    eig_dominant: Complex
+    spectral_radius: float
+    eigenvalues: Eigenvalues
+
+
+@dataclass(frozen=True)
+class Maps:
+    explicit: MapSpectrum
+    imex: MapSpectrum
+
+
+@dataclass(frozen=True)
+class FastestMode:
+    name: str
+    mu: float
+    dt_mu: float
+    axis: int
+    is_bus_yaw: bool
+    gain_block: str
+    share: float
+    gain: float
+    dt_stable: float
+    dt_margin: float
+    gain_stable: float | None
+    gain_margin: float | None
+
+
+@dataclass(frozen=True)
+class DelayedRoot:
+    root: Complex
+    modulus: float
+    period_steps: float | None
+    stable: bool
+
+
+@dataclass(frozen=True)
+class Theory:
+    """Stage 4 at the representative step (eqs. 21–24)."""
+
+    rule: str
+    step: int
+    t: float
+    s_min_G: float
+    gamma: float
+    mu: list[float]
+    mu_max: float
+    dt_mu_max: float
+    dt_star_damping: float
+    dt_star_map: float | None
+    regime: str
+    rho_modes: list[float]
+    eig_dominant: Complex
+    spectral_radius: float
+    update_order: str
+    note_order: NoteOrder
+    maps: Maps
+    fastest_mode: FastestMode
+    integrator: str
+    dt: float
+    delay_steps: int
+    delayed: DelayedRoot | None
+    M_breve: list[list[float]]
+    D_breve: list[list[float]]
+    K_breve: list[list[float]]
+    J_x: list[list[float]]
+    K_x: list[list[float]]
+    # the window's counts: in a complete log's record only
+    window_steps_below_floor: int | None = None
+    at_or_above_floor: bool | None = None
+
+
+@dataclass(frozen=True)
+class Alignment:
+    abs_cos: float
+    theory_direction: list[float]
+    data_direction: list[float]
+
+
+@dataclass(frozen=True)
+class VelocityJump:
+    median: float
+    max: float
+
+
+@dataclass(frozen=True)
+class BusRate:
+    lag1: float
+    std: float
+    step_rms: float
+    alternating_rms: float
+    step_median: float
+    step_bound: float
+    step_ratio: float
+    at_bound_share: float
+
+
+@dataclass(frozen=True)
+class Metrics:
+    pointing_err_deg_max: float
+    boresight_err_deg_max: float
+    coverage_final: float
+    dt_mu_max_window_max: float
+    limit_share: dict[str, float]
+
+
+@dataclass(frozen=True)
+class ChannelHarm:
+    rms: float
+    channel: str
+    period2_amplitude: float
+    reversal_share: float
+    reversals_per_s: float
+
+
+@dataclass(frozen=True)
+class AttitudeJitter:
+    jitter_deg: float
+    jitter_deg_max: float
+    at_instants_deg: float
+    between_instants_deg: float
+    step_deg_median: float
+
+
+@dataclass(frozen=True)
+class Harm:
+    bus_torque: ChannelHarm
+    joint_torque: ChannelHarm
+    joint_rate: ChannelHarm
+    attitude: AttitudeJitter
+
+
+@dataclass(frozen=True)
+class Prediction:
+    period2_predicted: bool
+    period2_measured: bool
+    agrees: bool
+
+
+@dataclass(frozen=True)
+class RobotCard:
+    total_mass: float
+    com_b: list[float]
+    bus_mass: float
+    bus_com_b: list[float]
+    bus_inertia: list[list[float]]
+    pan_axis_b: list[float]
+    pan_axis_offset: float
+    I_zz_bus: float
+    D_b: float
+    mu_bus: float
+    dt_star_bus: float
+    roll_axis_offset: float
+    roll_boresight_cos: float
+    roll_camera_offset: float
+    I_roll: float
+    D_o: float
+    mu_roll: float
+    dt_star_roll: float
+
+
+@dataclass(frozen=True)
+class BusMode:
+    dt_mu_bus: float
+    critical_I_zz: float
+
+
+@dataclass(frozen=True)
+class MuMaxAlong:
+    min: float
+    max: float
+    closed_form: float
+    max_rel_dev: float
+    worst_step: int
+    steps: int
+    s_min_J_min: float
+    s_min_G_min: float
+    floor: float
+    steps_below_floor: int
+
+
+@dataclass(frozen=True)
+class ModesAlong:
+    samples: int
+    share: dict[str, float]
+    dt_mu_max: float
+    step_of_max: int
+    name_at_max: str
+    dt_mu_min: float
+
+
+@dataclass(frozen=True)
+class Divergence:
+    rule: str
+    direction: list[float]
+    first_limit_step: int
+    fit_steps: list[int]
+    alternating: bool
+    growth_factor: float
+    predicted: float
+    predicted_note_order: float
+    ratio: float
+    ratio_note_order: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class Identity:
+    """What every record holds: which log, which code."""
+
+    schema: str
+    spec_name: str
+    log: str
+    log_sha256: str
+    spec_hash: str
+    sim_version: str
+    analysis_version: str
+    integrator: str
+    dt: float
+    n_steps: int
+    directions_sha256: str | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompleteRecord(Identity):
+    """The record of a complete log: stages 1–6, and stage 7 when compared."""
+
+    window: Window
+    provenance: Provenance
+    directions: list[Direction]
+    dominant: Dominant
+    theory: Theory
+    alignment: Alignment
+    velocity_jump: VelocityJump
+    bus_rate: BusRate
+    metrics: Metrics
+    harm: Harm
+    prediction: Prediction
+    versions: dict[str, str]
+    robot: RobotCard
+    bus_mode: BusMode
+    mu_max_log: MuMaxAlong
+    modes_along: ModesAlong
+    comparison: Comparison | None = None
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Stage 7: this run against another of the same robot (``other``: its whole record)."""
+
+    against: str
+    against_log: str
+    lag1_flip: bool
+    amplitude_ratio: float
+    coverage_diff_pp: float
+    table: list[dict[str, Any]]
+    other: OtherRecord
+
+
+@dataclass(frozen=True, kw_only=True)
+class OtherRecord(CompleteRecord):
+    """The compared run's record, inside a comparison: as written by stage 7, without the
+    keys only a written record has."""
+
+    schema: str | None = None
+    directions_sha256: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class DivergedRecord(Identity):
+    """The record of a diverged log: the divergence stage only."""
+
+    status: str
+    diverged_step: int
+    error: str
+    note: str
+    provenance: Provenance
+    divergence: Divergence
+    theory: Theory
+    robot: RobotCard
+
+
+def record_type(record: dict) -> type:
+    """The type of a record as read: a diverged log's, else a complete log's."""
+    return DivergedRecord if record.get("status") == "diverged" else CompleteRecord
+
+
+# -- checking a record --------------------------------------------------------------------
+
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _problem(value: Any, tp: Any, where: str) -> str | None:
+    """Where and why ``value`` is not of type ``tp``, or None."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (Union, types.UnionType):
+        problems = [_problem(value, a, where) for a in args]
+        return None if any(p is None for p in problems) else next(p for p in problems if p)
+    if tp is type(None):
+        return None if value is None else f"{where}: {value!r} is not null"
+    if tp is float:
+        return None if _is_number(value) else f"{where}: {value!r} is not a number"
+    if tp is int:
+        return None if isinstance(value, int) and not isinstance(value, bool) else (
+            f"{where}: {value!r} is not an integer")
+    if tp in (bool, str):
+        return None if isinstance(value, tp) else f"{where}: {value!r} is not a {tp.__name__}"
+    if tp is Any:
+        return None
+    if origin is list:
+        if not isinstance(value, list):
+            return f"{where}: not a list"
+        return next((p for i, v in enumerate(value) if (p := _problem(v, args[0],
+                                                                      f"{where}.{i}"))), None)
+    if origin is dict:
+        if not isinstance(value, dict):
+            return f"{where}: not a mapping"
+        return next((p for k, v in value.items() if (p := _problem(v, args[1],
+                                                                   f"{where}.{k}"))), None)
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            return f"{where}: not a mapping"
+        fields = {f.name: f for f in dataclasses.fields(tp)}
+        hints = _hints(tp)
+        prefix = f"{where}." if where else ""
+        for name, f in fields.items():
+            required = (f.default is dataclasses.MISSING
+                        and f.default_factory is dataclasses.MISSING)
+            if name not in value:
+                if required:
+                    return f"{prefix}{name}: missing"
+                continue
+            if (p := _problem(value[name], hints[name], f"{prefix}{name}")) is not None:
+                return p
+        extra = sorted(set(value) - set(fields))
+        return f"{prefix}{extra[0]}: not a field of the record" if extra else None
+    raise TypeError(f"no check for type {tp!r}")  # a schema this module cannot read
+
+
+def check_record(record: dict) -> str | None:
+    """Why ``record`` is not an analysis record of its kind (the first field that is
+    missing, extra or of the wrong type, by its dotted path), or None."""
+    return _problem(record, record_type(record), "")
+
+
+# -- paths into a record --------------------------------------------------------------------
+
+def field_type(path: str, cls: type = CompleteRecord) -> Any:
+    """The type of the field a dotted ``path`` names in a record of type ``cls``; a
+    KeyError naming the first part that names no field. A list is entered by an index
+    (``directions.0``, ``-1`` the last), a ``dict[str, X]`` field by any key."""
+    tp: Any = cls
+    for part in path.split("."):
+        origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if origin in (Union, types.UnionType):  # an optional field: the field's own type
+            inner = [a for a in args if a is not type(None)]
+            tp, origin, args = inner[0], typing.get_origin(inner[0]), typing.get_args(inner[0])
+        if dataclasses.is_dataclass(tp):
+            hints = _hints(tp)
+            if part not in hints:
+                raise KeyError(part)
+            tp = hints[part]
+        elif origin is list and part.lstrip("-").isdigit():
+            tp = args[0]
+        elif origin is dict:
+            tp = args[1]
+        else:
+            raise KeyError(part)
+    return tp
+
+
+def value_at(obj: Any, path: str | tuple[str, ...]) -> Any:
+    """The value a path (dotted, or its parts) names in a record or any JSON value: mappings
+    by key, lists by index (negative from the end). A KeyError naming the first part that
+    names nothing. The one way the claims and the reports read a record's field."""
+    for part in path.split(".") if isinstance(path, str) else path:
+        if isinstance(obj, dict) and part in obj:
+            obj = obj[part]
+        elif (isinstance(obj, list) and isinstance(part, str) and part.lstrip("-").isdigit()
+              and -len(obj) <= int(part) < len(obj)):
+            obj = obj[int(part)]
+        else:
+            raise KeyError(part)
+    return obj
