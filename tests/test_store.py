@@ -105,3 +105,16 @@ def test_a_refused_analysis_leaves_no_folder(tmp_path):
     with pytest.raises(Exception, match="window"):
         store.analysis(log, window_start=1e9, quiet=True)
     assert not out.exists()
+
+
+def test_a_record_of_another_window_is_not_the_default_analysis(tmp_path):
+    """``analyze --window-start`` writes a record of its window; the default analysis of the
+    same log is then made again, never reused from it."""
+    store = ArtefactStore(tmp_path)
+    log = store.run(_spec("a"), quiet=True).log
+    chosen = store.analysis(log, window_start=0.1, quiet=True)
+    assert not chosen.reused
+    assert chosen.record["window"]["start_step"] == round(0.1 / log.spec.mission.dt)
+    again = ArtefactStore(tmp_path).analysis(log, quiet=True)
+    assert not again.reused and again.record["window"]["start_step"] == log.rows // 2
+    assert ArtefactStore(tmp_path).analysis(log, quiet=True).reused

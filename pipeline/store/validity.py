@@ -70,11 +70,19 @@ def _made_from(record: dict, log: VerifiedLog) -> bool:
 
 def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None
                      ) -> dict | None:
-    """The analysis record at ``path`` if it was made from this log by this analysis code,
-    compared with ``against`` exactly when one is given, else None."""
+    """The analysis record at ``path`` if it was made from this log by this analysis code, over
+    the default window, compared with ``against`` exactly when one is given, else None."""
+    from pipeline.analysis.stages import choose_window
+
     record = try_read_analysis(path)
     if (record is None or record.get("analysis_version") != analysis_version()
             or not _made_from(record, log)):
+        return None
+    # A record of another window (``analyze --window-start``) is not the default analysis.
+    window = record.get("window")
+    default = choose_window(log.rows, log.spec.mission.dt, None)
+    if window is not None and (window.get("start_step"), window.get("stop_step")) != (
+            default.start, default.stop):
         return None
     comparison = record.get("comparison")
     if against is None:
