@@ -94,9 +94,8 @@ def step_costs(spec: Spec, log: Path, repeats: int) -> dict:
     On a shared host the speed drifts between repeats; a ratio taken within one repeat
     compares like with like, so the ratios are the median of the per-repeat ratios.
     """
-    cols = pq.read_table(log, columns=["q", "v"])
-    q = np.stack(cols.column("q").to_numpy(zero_copy_only=False))
-    v = np.stack(cols.column("v").to_numpy(zero_copy_only=False))
+    cols = ArtefactStore().open_log(log).columns(["q", "v"])
+    q, v = cols["q"], cols["v"]
     robot = GiordanoRobot(spec)
     analysis_once(robot, log)  # warm-up: compiles the analysis kernels if the cache is cold
     floor, sim, ana = [], [], []

@@ -347,7 +347,12 @@ class VerifiedLog:
     _file: pq.ParquetFile | None = field(default=None, repr=False, compare=False)
 
     def _parquet(self) -> pq.ParquetFile:
-        return self._file if self._file is not None else _open(self.path)
+        if self._file is None:  # unpickled in another process: the same bytes, or nothing
+            handle, sha = _hashed(self.path)
+            if sha != self.sha256:
+                raise _damaged(self.path, "content", "the file changed after it was verified")
+            object.__setattr__(self, "_file", _open(self.path, handle))
+        return self._file
 
     def __getstate__(self) -> dict:
         """Pickled (to a worker of the report) without its open file: a worker reads the
@@ -401,21 +406,33 @@ def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
     # table is read later through it (the same bytes, even if the path is replaced
     # meanwhile). pyarrow's file, not Python's: nothing to close by hand; read, not mapped:
     # a long log's pages do not stay in the process's memory.
-    try:
-        handle = pa.OSFile(str(path))
-    except (pa.ArrowInvalid, OSError) as exc:
-        raise LogError(f"{path}: not a readable Parquet log ({str(exc).splitlines()[0]})"
-                       ) from None
-    sha = hashlib.sha256()
-    while chunk := handle.read(1 << 22):
-        sha.update(chunk)
-    handle.seek(0)
+    handle, sha = _hashed(path)
     pf = _open(path, handle)
     meta = _meta(path, pf)
     spec = _verified_spec(path, meta, pf.metadata.num_rows)
     spec._robot_path = _recorded_robot(path, meta, spec, digest)
-    _check_rows(path, pf, spec.mission.dt)
-    return VerifiedLog(path, meta, spec, sha.hexdigest(), pf.metadata.num_rows, pf)
+    try:
+        _check_rows(path, pf, spec.mission.dt)
+    except (OSError, pa.ArrowException) as exc:  # a data page that does not decode
+        raise _damaged(path, "data", f"a row group does not read "
+                       f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+                       ) from None
+    return VerifiedLog(path, meta, spec, sha, pf.metadata.num_rows, pf)
+
+
+def _hashed(path: Path) -> tuple[pa.NativeFile, str]:
+    """The file opened for reading and the SHA-256 of its bytes, read through that handle
+    (rewound): what is read later through it is what was hashed."""
+    try:
+        handle = pa.OSFile(str(path))
+        sha = hashlib.sha256()
+        while chunk := handle.read(1 << 22):
+            sha.update(chunk)
+        handle.seek(0)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise LogError(f"{path}: not a readable Parquet log ({str(exc).splitlines()[0]})"
+                       ) from None
+    return handle, sha.hexdigest()
 
 
 def _verified_spec(path: Path, meta: LogMeta, n: int) -> Spec:

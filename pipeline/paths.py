@@ -24,7 +24,9 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 PROJECT_ROOT = PACKAGE_DIR.parent
 # Installed, the package carries the specs inside it; in a source checkout they are at the top
 # of the repository, where the design card and users look for them.
-SHIPPED_SPECS = (PACKAGE_DIR / "specs" if (PACKAGE_DIR / "specs").is_dir()
+# (A shipped spec marks the installed copy: a checkout updated across the move may keep an
+# old pipeline/specs/ folder holding only a user's untracked files.)
+SHIPPED_SPECS = (PACKAGE_DIR / "specs" if (PACKAGE_DIR / "specs" / "nominal.yaml").is_file()
                  else PROJECT_ROOT / "specs")
 SPEC_PATH_ENV = "BREVE_SPEC_PATH"
 CACHE_ENV = "BREVE_CACHE_DIR"

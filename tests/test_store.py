@@ -118,3 +118,64 @@ def test_a_record_of_another_window_is_not_the_default_analysis(tmp_path):
     again = ArtefactStore(tmp_path).analysis(log, quiet=True)
     assert not again.reused and again.record["window"]["start_step"] == log.rows // 2
     assert ArtefactStore(tmp_path).analysis(log, quiet=True).reused
+
+
+def test_a_verified_log_sent_to_another_process_reads_only_the_bytes_verified(tmp_path):
+    """A report's figure workers get the log pickled, without its open file: the first read
+    there hashes the file again and refuses one that changed since the verification."""
+    import pickle
+
+    from pipeline.errors import LogDamaged
+
+    store = ArtefactStore(tmp_path)
+    a = store.run(_spec("a"), quiet=True).log
+    copy = pickle.loads(pickle.dumps(a))
+    assert (copy.columns(["t"])["t"] == a.columns(["t"])["t"]).all()
+    b = store.run(_spec("b", **{"mission.dt": 0.01}), quiet=True).log
+    stale = pickle.loads(pickle.dumps(a))
+    os.replace(b.path, a.path)
+    with pytest.raises(LogDamaged, match="changed after it was verified"):
+        stale.columns(["t"])
+
+
+def test_the_door_hands_out_only_a_file_that_is_current(tmp_path, monkeypatch):
+    """Reuse is decided again on the file that was verified: another spec's log put in place
+    after the footer was read is not handed out as this spec's."""
+    store = ArtefactStore(tmp_path)
+    a = store.run(_spec("a"), quiet=True).log
+    other = ArtefactStore(tmp_path / "x").run(_spec("a", **{"mission.duration": 0.9}),
+                                              quiet=True).log
+    footer_then = a.meta
+    os.replace(other.path, a.path)
+    monkeypatch.setattr(door, "current_log", lambda *args: footer_then)  # read before
+    assert ArtefactStore(tmp_path).current_run(_spec("a")) is None
+
+
+def test_a_comparison_over_another_window_of_the_second_run_is_not_reused(tmp_path):
+    store = ArtefactStore(tmp_path)
+    a = store.run(_spec("a"), quiet=True).log  # 20 steps: the default window starts at 10
+    b = store.run(_spec("b", **{"mission.duration": 1.2}), quiet=True).log  # 40: at 20
+    start = 10 * a.spec.mission.dt  # a's default start, not b's
+    chosen = store.analysis(a, b, window_start=start, quiet=True)
+    assert chosen.record["window"]["start_step"] == a.rows // 2
+    assert chosen.record["comparison"]["other"]["window"]["start_step"] != b.rows // 2
+    assert not ArtefactStore(tmp_path).analysis(a, b, quiet=True).reused
+    assert ArtefactStore(tmp_path).analysis(a, b, quiet=True).reused
+
+
+def test_a_log_whose_data_does_not_decode_is_damaged_and_made_again(tmp_path):
+    from pipeline.errors import LogDamaged
+    from pipeline.logs import verify_log
+
+    store = ArtefactStore(tmp_path)
+    log = store.run(_spec("a"), quiet=True).log
+    good = log.path.read_bytes()
+    data = bytearray(good)
+    for frac in (0.2, 0.35, 0.5):  # data pages, well before the footer
+        i = int(len(data) * frac)
+        data[i:i + 64] = bytes(64)
+    log.path.write_bytes(bytes(data))
+    with pytest.raises(LogDamaged, match="tampered or damaged"):
+        verify_log(log.path)
+    again = ArtefactStore(tmp_path).run(_spec("a"), quiet=True)
+    assert not again.reused and again.path.read_bytes() == good

@@ -33,7 +33,7 @@ from pipeline.progress import interactive, stage
 from pipeline.provenance.keys import file_digest
 from pipeline.spec import Spec
 from pipeline.store.locks import folder_lock, remove_stale_temps
-from pipeline.store.validity import current_analysis, current_log
+from pipeline.store.validity import current_analysis, current_log, log_is_current
 
 
 @dataclass(frozen=True)
@@ -146,11 +146,18 @@ class ArtefactStore:
 
     def current_run(self, spec: Spec) -> VerifiedLog | None:
         """The stored log of ``spec`` if it is current (this spec, robot and simulator, a
-        finished run), verified; else None."""
+        finished run) and whole, verified; else None (a damaged one is made again)."""
         path = self.log_path(spec)
         if current_log(path, spec, self.digest) is None:
             return None
-        return self.open_log(path)
+        try:
+            log = self.open_log(path)
+        except PipelineError:  # damaged since it was made: not current, made again
+            self._forget(path)
+            return None
+        # The key again on the file that was verified: the path may have been replaced
+        # between the footer's read and the verification.
+        return log if log_is_current(log.meta, log.rows, spec, self.digest) else None
 
     def run(self, spec: Spec, expect: str | None = "complete", force: bool = False,
             quiet: bool = False) -> StoredRun:

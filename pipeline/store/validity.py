@@ -51,12 +51,16 @@ def current_log(path: Path, spec: Spec, digest: Callable[[Path], str] = file_dig
         meta, rows = read_footer(path)
     except LogError:
         return None
-    if (meta.spec_hash != spec.spec_hash or meta.sim_version != sim_version()
-            or meta.status not in FINISHED
-            or meta.robot_hash != digest(spec.robot_path)
-            or (meta.status == "complete" and rows != spec.n_steps)):
-        return None
-    return meta
+    return meta if log_is_current(meta, rows, spec, digest) else None
+
+
+def log_is_current(meta: LogMeta, rows: int, spec: Spec,
+                   digest: Callable[[Path], str] = file_digest) -> bool:
+    """:func:`current_log`'s key on a log's metadata and row count (the footer read, or a
+    verified log's: the door checks the file it hands out, not only the one it looked at)."""
+    return (meta.spec_hash == spec.spec_hash and meta.sim_version == sim_version()
+            and meta.status in FINISHED and meta.robot_hash == digest(spec.robot_path)
+            and (meta.status != "complete" or rows == spec.n_steps))
 
 
 def _made_from(record: dict, log: VerifiedLog) -> bool:
@@ -72,25 +76,33 @@ def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None =
                      ) -> dict | None:
     """The analysis record at ``path`` if it was made from this log by this analysis code, over
     the default window, compared with ``against`` exactly when one is given, else None."""
-    from pipeline.analysis.stages import choose_window
-
     record = try_read_analysis(path)
     if (record is None or record.get("analysis_version") != analysis_version()
             or not _made_from(record, log)):
         return None
-    # A record of another window (``analyze --window-start``) is not the default analysis.
-    window = record.get("window")
-    default = choose_window(log.rows, log.spec.mission.dt, None)
-    if window is not None and (window.get("start_step"), window.get("stop_step")) != (
-            default.start, default.stop):
+    # A record of another window (``analyze --window-start``) is not the default analysis,
+    # nor is a comparison whose second run was analysed over another window.
+    if not _default_window(record, log):
         return None
     comparison = record.get("comparison")
     if against is None:
         return record if comparison is None else None
-    if not isinstance(comparison, dict) or not _made_from(comparison.get("other", {}),
-                                                          against):
+    other = comparison.get("other", {}) if isinstance(comparison, dict) else None
+    if (not isinstance(other, dict) or not _made_from(other, against)
+            or not _default_window(other, against)):
         return None
     return record
+
+
+def _default_window(record: dict, log: VerifiedLog) -> bool:
+    """The record's window is the default one of its log (a diverged log's has none)."""
+    from pipeline.analysis.stages import choose_window
+
+    window = record.get("window")
+    if window is None:
+        return True
+    default = choose_window(log.rows, log.spec.mission.dt, None)
+    return (window.get("start_step"), window.get("stop_step")) == (default.start, default.stop)
 
 
 def current_sweep(table: Path, base_spec_hash: str, points: Iterable[str]) -> bool:
