@@ -43,9 +43,10 @@ import pyarrow.parquet as pq
 from pipeline.analysis import signals
 from pipeline.analysis.stages import Window, rebuild_and_project
 from pipeline.artefact_paths import log_path
+from pipeline.atomic_files import atomic_write_text
 from pipeline.bench_linalg import linalg_costs, linalg_markdown
 from pipeline.bench_linalg import summary as _stats
-from pipeline.logs import atomic_write_text, file_metadata
+from pipeline.logs import file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec

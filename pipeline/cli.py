@@ -84,6 +84,7 @@ def _cmd_report(a: argparse.Namespace) -> int:
 def _claims(claims: str, out: Path, force: bool = False):
     """The claims stage: its exit code and, when it evaluated, its ClaimsOutcome (None when
     the register was current)."""
+    from pipeline.atomic_files import atomic_write_text
     from pipeline.claims.record import (
         RECORD_NAME,
         exit_code,
@@ -94,7 +95,6 @@ def _claims(claims: str, out: Path, force: bool = False):
         summary_lines,
     )
     from pipeline.claims.register import load_claims, register_sources
-    from pipeline.logs import atomic_write_text
     from pipeline.paths import display_path
     from pipeline.progress import say, stage
     from pipeline.spec import resolve_spec_path

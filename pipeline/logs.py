@@ -11,7 +11,6 @@ import contextlib
 import hashlib
 import json
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.errors import LogDamaged, LogError, OutputError, SpecError
+from pipeline.atomic_files import atomic_target, cannot_write
+from pipeline.errors import LogDamaged, LogError, SpecError
 from pipeline.log_layout import VECTOR_COLUMNS
 from pipeline.paths import find_on_search_path
 from pipeline.platform import fingerprint
@@ -33,8 +33,6 @@ META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "st
 # numeric column of a log must be finite.
 MAY_BE_INFINITE = ("kappa_G", "kappa_J")
 ROW_GROUP = 65_536
-_UMASK = os.umask(0)
-os.umask(_UMASK)
 
 
 @dataclass(frozen=True)
@@ -58,44 +56,6 @@ class LogMeta:
         return self.spec["name"]
 
 
-def _cannot_write(path: Path, exc: OSError) -> OutputError:
-    return OutputError(f"{path}: cannot write: {exc.strerror or exc} (nothing written there)")
-
-
-def _atomic_target(path: Path) -> Path:
-    """A fresh temporary file beside ``path``, readable as an ordinary file would be.
-    An output folder that is a file, read-only or full is an OutputError naming the path."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise _cannot_write(path, exc) from None
-    os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; the final file should not be
-    os.close(fd)
-    return Path(tmp)
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write bytes to ``path`` atomically (temporary file, fsync, rename); on failure the
-    temporary file is removed and ``path`` is as it was."""
-    path = Path(path)
-    tmp = _atomic_target(path)
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise _cannot_write(path, exc) from None
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    atomic_write_bytes(path, text.encode())
-
-
 def _arrow_column(values: np.ndarray) -> pa.Array:
     values = np.ascontiguousarray(values)
     if values.ndim == 1:
@@ -109,14 +69,14 @@ def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, 
     path = Path(path)
     table = pa.table({k: _arrow_column(v) for k, v in columns.items()})
     table = table.replace_schema_metadata({k.encode(): v.encode() for k, v in metadata.items()})
-    tmp = _atomic_target(path)
+    tmp = atomic_target(path)
     try:
         pq.write_table(table, tmp, row_group_size=ROW_GROUP, compression="zstd")
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except OSError as exc:  # pyarrow's IOError on a full disk is an OSError too
-        raise _cannot_write(path, exc) from None
+        raise cannot_write(path, exc) from None
     finally:
         tmp.unlink(missing_ok=True)
 
@@ -134,7 +94,7 @@ class LogWriter:
         self.path = Path(path)
         self.metadata = metadata
         self.rows = 0
-        self._tmp = _atomic_target(self.path)
+        self._tmp = atomic_target(self.path)
         self._writer: pq.ParquetWriter | None = None
 
     def write(self, columns: dict[str, np.ndarray]) -> None:
@@ -147,7 +107,7 @@ class LogWriter:
                 self._writer = pq.ParquetWriter(self._tmp, schema, compression="zstd")
             self._writer.write_table(table, row_group_size=ROW_GROUP)
         except OSError as exc:
-            raise _cannot_write(self.path, exc) from None
+            raise cannot_write(self.path, exc) from None
         self.rows += table.num_rows
 
     def close(self, final: dict[str, str]) -> Path:
@@ -161,7 +121,7 @@ class LogWriter:
                 os.fsync(fh.fileno())
             os.replace(self._tmp, self.path)
         except OSError as exc:
-            raise _cannot_write(self.path, exc) from None
+            raise cannot_write(self.path, exc) from None
         return self.path
 
     def __enter__(self) -> LogWriter:

@@ -347,7 +347,7 @@ def test_a_full_disk_leaves_nothing_partial(tmp_path, monkeypatch):
     import errno
     import os
 
-    import pipeline.logs as logs
+    import pipeline.atomic_files as atomic
     from pipeline.errors import OutputError
 
     target = tmp_path / "x.json"
@@ -356,9 +356,9 @@ def test_a_full_disk_leaves_nothing_partial(tmp_path, monkeypatch):
     def full(fd):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(logs.os, "fsync", full)
+    monkeypatch.setattr(atomic.os, "fsync", full)
     with pytest.raises(OutputError, match="No space left on device"):
-        logs.atomic_write_text(target, "new")
+        atomic.atomic_write_text(target, "new")
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["x.json"]  # no temporary file left
 

@@ -23,8 +23,8 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis.schema import check_record
 from pipeline.artefact_paths import ANALYSIS_FILE, DIRECTIONS_FILE
+from pipeline.atomic_files import atomic_write_bytes, atomic_write_text
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_bytes, atomic_write_text
 
 # /2: sim_version and analysis_version (was code_version); /3: theory.fastest_mode (every damping
 # mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read;

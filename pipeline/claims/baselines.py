@@ -28,9 +28,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.artefact_paths import log_path
+from pipeline.atomic_files import atomic_write_bytes, atomic_write_text
 from pipeline.claims.tolerances import load_tolerances, measure, write_tolerances
 from pipeline.errors import CheckFailed, PipelineError
-from pipeline.logs import LogError, atomic_write_bytes, atomic_write_text, read_meta
+from pipeline.logs import LogError, read_meta
 from pipeline.paths import SHIPPED_SPECS, display_path
 from pipeline.platform import Platform, describe, differences, fingerprint
 from pipeline.provenance.keys import file_digest, sim_version

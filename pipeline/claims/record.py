@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.artefact_paths import CLAIMS_FILE
+from pipeline.atomic_files import atomic_write_text
 from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, Claim, ClaimCheck, ClaimsFile
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_text
 from pipeline.paths import display_path
 
 STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")

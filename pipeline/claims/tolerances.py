@@ -51,8 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import SpecError
-from pipeline.logs import atomic_write_text
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, library_versions, sim_version
 from pipeline.sim.control_step import STATE

@@ -19,8 +19,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import MaxNLocator
 
+from pipeline.atomic_files import atomic_write_bytes
 from pipeline.errors import LogError
-from pipeline.logs import VerifiedLog, atomic_write_bytes
+from pipeline.logs import VerifiedLog
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.stability import REDUCED_SYMBOLS
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
 from pipeline.artefact_paths import CLAIMS_FILE
+from pipeline.atomic_files import atomic_write_text
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_text
 from pipeline.provenance.keys import report_version
 from pipeline.reports import figures as fg
 from pipeline.reports.mechanism import mechanism_context

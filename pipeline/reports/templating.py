@@ -15,7 +15,7 @@ from urllib.parse import quote
 
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-from pipeline.logs import atomic_write_text
+from pipeline.atomic_files import atomic_write_text
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 

@@ -123,7 +123,7 @@ def crosscheck_robot_file(path: Path | str, model: pin.Model, camera_frame: str)
         pass
     result = compare_parsers(path, model, camera_frame)
     try:
-        from pipeline.logs import atomic_write_text
+        from pipeline.atomic_files import atomic_write_text
 
         atomic_write_text(stored, json.dumps(asdict(result), indent=1) + "\n")
     except OutputError:

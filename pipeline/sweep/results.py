@@ -13,8 +13,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.atomic_files import atomic_write_bytes
 from pipeline.errors import LogError
-from pipeline.logs import atomic_write_bytes
 from pipeline.sweep.grid import format_value
 from pipeline.sweep.point import FIGURES
 

@@ -15,7 +15,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.logs import atomic_write_text
+from pipeline.atomic_files import atomic_write_text
 from pipeline.paths import PROJECT_ROOT
 from pipeline.provenance.keys import source_version
 from pipeline.verify.checks_base import CheckResult, defining_qualname
