@@ -20,6 +20,7 @@ out are its inputs, not expected to change under it. A file it writes replaces i
 from __future__ import annotations
 
 import sys
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -189,15 +190,15 @@ class ArtefactStore:
 
         path = self.log_path(spec)
         self._forget(path)
-        if quiet:
-            out = run_spec(spec, self.logs, raise_on_failure=False)
-            return self.open_log(out.path), out.warnings
-        with stage(f"mission {spec.name}",
-                   f"({spec.n_steps} steps) -> {display_path(path)}") as st:
-            out = run_spec(spec, self.logs, progress=interactive(), raise_on_failure=False)
+        with (nullcontext() if quiet else
+              stage(f"mission {spec.name}", f"({spec.n_steps} steps) -> {display_path(path)}")
+              ) as st:
+            out = run_spec(spec, self.logs, progress=not quiet and interactive(),
+                           raise_on_failure=False)
             log = self.open_log(out.path)
             _check_end(log, expect)
-            st.done(out.status)
+            if st is not None:
+                st.done(out.status)
         return log, out.warnings
 
     # -- analyses -------------------------------------------------------------------------
@@ -235,11 +236,8 @@ class ArtefactStore:
             if old is not None:
                 return StoredAnalysis(old, path, True)
             title = f"(against {against.spec.name})" if against is not None else ""
-            if quiet:
+            with nullcontext() if quiet else stage(f"analysis {log.spec.name}", title):
                 record = self._analyse(log, against, window_start, against_record)
-            else:
-                with stage(f"analysis {log.spec.name}", title):
-                    record = self._analyse(log, against, window_start, against_record)
             write_analysis(record, self.out)
         return StoredAnalysis(record, path, False)
 

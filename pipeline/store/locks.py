@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-from pipeline.errors import OutputError
+from pipeline.atomic_files import cannot_write
 
 LOCK_NAME = ".lock"
 
@@ -29,8 +29,7 @@ def _make_folder(folder: Path) -> list[Path]:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"{folder}: cannot write: {exc.strerror or exc} (nothing written "
-                          f"there)") from None
+        raise cannot_write(folder, exc) from None
     return made
 
 

@@ -17,6 +17,7 @@ import os
 import socket
 import time
 
+from pipeline.analysis.schema import value_at
 from pipeline.errors import PipelineError
 from pipeline.spec import Spec
 
@@ -44,11 +45,14 @@ FIGURES: dict[str, tuple[str, ...]] = {
 
 
 def figures(analysis: dict | None) -> dict[str, float]:
+    """The table's columns of a point's record (NaN where it has none: no record, a failed
+    point, a field that is null)."""
     out = {}
     for col, path in FIGURES.items():
-        node = analysis
-        for p in path:
-            node = node.get(p) if isinstance(node, dict) else None
+        try:
+            node = value_at(analysis, path) if analysis is not None else None
+        except KeyError:
+            node = None
         out[col] = float(node) if isinstance(node, int | float) else math.nan
     return out
 
