@@ -11,13 +11,14 @@ import atexit
 import shutil
 import subprocess
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
 from conftest import run_cli as _run_cli
 
 from pipeline.analysis.record import write_analysis
+from pipeline.analysis.schema import AnalysisRecord
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.logs import verify_log
 from pipeline.reports.render import render_all
@@ -48,10 +49,10 @@ def write_spec(folder: Path, name: str, parent: str, **extra: str) -> Path:
     return path
 
 
-def analyse_pair(log: Path, against: Path | None, out: Path) -> dict:
+def analyse_pair(log: Path, against: Path | None, out: Path) -> AnalysisRecord:
     record = analyze_log(verify_log(log))
     if against is not None:
-        record["comparison"] = compare(record, analyze_log(verify_log(against)))
+        record = replace(record, comparison=compare(record, analyze_log(verify_log(against))))
     write_analysis(record, out)
     return record
 

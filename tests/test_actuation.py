@@ -155,9 +155,9 @@ def test_the_fastest_mode_is_named_along_the_whole_log(tmp_path, name, mode):
     spec = with_overrides(load_spec(name), {"mission.duration": 3.0})
     path = run_spec(spec, tmp_path).path
     got = fastest_modes_along(GiordanoRobot(spec), spec, verify_log(path), samples=12)
-    assert got["share"] == {mode: 1.0} and got["samples"] == 12
+    assert got.share == {mode: 1.0} and got.samples == 12
     logged = read_columns(path, ["dt_mu_max"])["dt_mu_max"]
-    assert got["dt_mu_max"] == pytest.approx(logged[got["step_of_max"]], rel=1e-9)
+    assert got.dt_mu_max == pytest.approx(logged[got.step_of_max], rel=1e-9)
 
 
 @pytest.mark.parametrize(("name", "rel"), [("nominal", 1e-6), ("servicer_nominal", 1e-12)])

@@ -228,6 +228,6 @@ def test_bus_rate_at_bound_share_counts_the_steps_at_dt_a_max_whatever_the_flag(
     x = np.concatenate([[0.0], np.cumsum(bound * sizes * (-1.0) ** np.arange(100))])
     w_b = x[:, None] * axis[None, :]
     got = bus_rate_statistics(w_b, dt, a_max)
-    assert got["at_bound_share"] == pytest.approx(0.8, abs=1e-12)
-    assert got["step_ratio"] == pytest.approx(1.0, abs=1e-12)
-    assert got["lag1"] < -0.9
+    assert got.at_bound_share == pytest.approx(0.8, abs=1e-12)
+    assert got.step_ratio == pytest.approx(1.0, abs=1e-12)
+    assert got.lag1 < -0.9

@@ -38,6 +38,7 @@ import pytest
 import scipy.linalg as sla
 
 from pipeline.analysis.directions import rebuild_gamma
+from pipeline.analysis.schema import CompleteRecord
 from pipeline.analysis.stages import analyze_log
 from pipeline.logs import read_columns, verify_log
 from pipeline.paths import PROJECT_ROOT
@@ -61,7 +62,7 @@ class PeerRun:
     cols: dict
     steps: list[int]
     below_floor: list[int]
-    record: dict
+    record: CompleteRecord
 
 
 # The tests on a mission's log are slow: the fixture runs a mission of its own per robot.
@@ -74,7 +75,7 @@ def peer_run(request, tmp_path_factory) -> PeerRun:
     n = len(cols["q"])
     record = analyze_log(verify_log(path))
     steps = sorted({*np.linspace(0, n - 1, N_STEPS).astype(int).tolist(),
-                    record["theory"]["step"]})
+                    record.theory.step})
     below = [k for k in steps if cols["s_min_J"][k] < robot.floor]
     return PeerRun(spec, robot, mujoco_model(spec.robot_path), cols,
                    [k for k in steps if k not in below], below, record)
@@ -148,7 +149,7 @@ def _peers(run: PeerRun, steps) -> dict[int, Peer]:
 def test_the_compared_steps_are_above_the_floor(peer_run):
     """Every compared step inverts J⊕ exactly; any below the floor is flagged, not compared."""
     assert len(peer_run.steps) >= N_STEPS - 1, peer_run.below_floor
-    assert peer_run.record["theory"]["at_or_above_floor"]
+    assert peer_run.record.theory.at_or_above_floor
     for k, p in _peers(peer_run, peer_run.steps).items():
         assert p.s_min_J >= peer_run.robot.floor, k
 
@@ -198,12 +199,12 @@ def test_mu_max_matches_mujoco(peer_run):
 def test_the_representative_step_matches_mujoco(peer_run):
     """The analysis' theory at its representative step: M̆ and μ_max (eqs. 10, 21)."""
     r = peer_run
-    th = r.record["theory"]
-    p = _peers(r, [th["step"]])[th["step"]]
+    th = r.record.theory
+    p = _peers(r, [th.step])[th.step]
     rel = ULPS * EPS * p.kappa_G * p.lever
-    np.testing.assert_allclose(np.array(th["M_breve"]), p.M_breve, rtol=0,
+    np.testing.assert_allclose(np.array(th.M_breve), p.M_breve, rtol=0,
                                atol=rel * np.max(np.abs(p.M_breve)))
-    assert abs(th["mu_max"] / p.mu[-1] - 1) <= rel
+    assert abs(th.mu_max / p.mu[-1] - 1) <= rel
 
 
 def test_the_peer_sees_the_old_seed_camera(monkeypatch):

@@ -134,15 +134,15 @@ def test_the_delayed_modes_root_against_its_closed_form_and_a_simulation(dt_mu):
 
     got = delayed_mode(dt_mu)
     if dt_mu < 0.25:
-        assert got["root"]["imag"] == 0.0 and got["period_steps"] == float("inf")
-        assert got["modulus"] == pytest.approx((1 + np.sqrt(1 - 4 * dt_mu)) / 2)
+        assert got.root.imag == 0.0 and got.period_steps == float("inf")
+        assert got.modulus == pytest.approx((1 + np.sqrt(1 - 4 * dt_mu)) / 2)
     else:
-        assert got["modulus"] == pytest.approx(np.sqrt(dt_mu), rel=1e-12)
+        assert got.modulus == pytest.approx(np.sqrt(dt_mu), rel=1e-12)
         angle = np.arccos(1 / (2 * np.sqrt(dt_mu)))
-        assert got["period_steps"] == pytest.approx(2 * np.pi / angle, rel=1e-12)
+        assert got.period_steps == pytest.approx(2 * np.pi / angle, rel=1e-12)
     e = [1.0, 1.0]
     for _ in range(400):
         e.append(e[-1] - dt_mu * e[-2])
     env = max(abs(x) for x in e[-20:]) / max(abs(x) for x in e[-120:-100])
-    assert env ** (1 / 100) == pytest.approx(got["modulus"], rel=2e-2)
-    assert got["stable"] == (dt_mu < 1)
+    assert env ** (1 / 100) == pytest.approx(got.modulus, rel=2e-2)
+    assert got.stable == (dt_mu < 1)

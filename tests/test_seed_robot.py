@@ -18,6 +18,8 @@ tolerance 1e-6 relative to max |M̆| leaves a 1000× margin while a frame or blo
 from __future__ import annotations
 
 import re
+from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -188,7 +190,7 @@ def test_reduced_inertia_at_the_representative_step_matches_the_kinetic_energy(
     """M̆ at the analysis' representative step against M̆ from finite differences of the
     kinetic energy; μ_max there against the closed form D_b / I_zz,bus."""
     rec = analyze_log(verify_log(short_nominal_log))
-    k = rec["theory"]["step"]
+    k = rec.theory.step
     q = read_columns(short_nominal_log, ["q"], k, k + 1)["q"][0]
     T = robot.terms(q, np.zeros(12))
     assert T.s_min_J > robot.floor  # the exact inverse: M̆ is the kinetic energy's
@@ -200,8 +202,8 @@ def test_reduced_inertia_at_the_representative_step_matches_the_kinetic_energy(
     _, D = block_gains(robot.spec.controller, 1.0)
     mu_fd = sla.eigh(D, M_fd, eigvals_only=True)
     assert mu_fd[-1] == pytest.approx(2.0 / I_ZZ_BUS, rel=1e-6)
-    assert rec["theory"]["mu_max"] == pytest.approx(2.0 / I_ZZ_BUS, rel=1e-9)
-    assert np.array(rec["theory"]["M_breve"]) == pytest.approx(T.reduced_inertia, abs=1e-15)
+    assert rec.theory.mu_max == pytest.approx(2.0 / I_ZZ_BUS, rel=1e-9)
+    assert np.array(rec.theory.M_breve) == pytest.approx(T.reduced_inertia, abs=1e-15)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -278,12 +280,12 @@ def test_unbounded_mission_ends_diverged_with_the_bound_and_the_fix(tmp_path):
     assert c["sat_v_max"][-3:].all()  # the criterion: three consecutive steps on the clip
 
     rec = analyze_log(verify_log(log))
-    g = rec["divergence"]
-    assert rec["status"] == "diverged" and "divergence step" in rec["note"]
-    assert g["alternating"] and g["fit_steps"][1] - g["fit_steps"][0] >= 4
+    g = rec.divergence
+    assert rec.status == "diverged" and "divergence step" in rec.note
+    assert g.alternating and g.fit_steps[1] - g.fit_steps[0] >= 4
     # The measured growth is the simulator's map's eigenvalue, not the note's order's.
-    assert g["growth_factor"] == pytest.approx(g["predicted"], rel=0.02)
-    assert abs(g["growth_factor"] / g["predicted_note_order"] - 1) > 0.02
+    assert g.growth_factor == pytest.approx(g.predicted, rel=0.02)
+    assert abs(g.growth_factor / g.predicted_note_order - 1) > 0.02
     out = run_cli("analyze", str(log), "--out", str(tmp_path / "rep"))
     assert out.returncode == 0, out.stderr
     assert "diverged log" in out.stdout and "Φ predicts" in out.stdout
@@ -318,8 +320,10 @@ def test_note_table_puts_the_note_beside_our_values():
         "simulator's update order (q moves with the updated velocity)": -2.926}
     assert rows["abs_cos"].cells[0].note is None and rows["abs_cos"].cells[0].rel_diff is None
     assert rows["provenance"].cells[0].ours is None  # not in this record: shown as —
-    # The mechanism report shows the table for the note's own pair only.
-    assert note_rows(rec, other) and not note_rows(rec, {**other, "spec_name": "other"})
+    # The mechanism report shows the table for the note's own pair only (it reads the names).
+    name = SimpleNamespace
+    assert note_rows(name(**rec), name(**other))
+    assert not note_rows(name(**rec), name(**{**other, "spec_name": "other"}))
 
 
 @pytest.mark.slow
@@ -338,7 +342,7 @@ def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
                            name="d6")
     a, b = run_spec(spec, logs).path, run_spec(dt010, logs).path
     rec = analyze_log(verify_log(a))
-    rec["comparison"] = compare(rec, analyze_log(verify_log(b)))
+    rec = replace(rec, comparison=compare(rec, analyze_log(verify_log(b))))
     write_analysis(rec, out)
     render_all(out)
     index = (out / "index.html").read_text()

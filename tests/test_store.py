@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+from dataclasses import replace
 
 import pytest
 
@@ -93,8 +94,8 @@ def test_the_recorded_log_is_none_when_the_bytes_are_not_the_analysed_ones(tmp_p
     log = store.run(_spec("a"), quiet=True).log
     record = store.analysis(log, quiet=True).record
     assert ArtefactStore(tmp_path).recorded_log(record).sha256 == log.sha256
-    assert ArtefactStore(tmp_path).recorded_log({**record, "log_sha256": "0" * 64}) is None
-    assert ArtefactStore(tmp_path).recorded_log({**record, "log": str(tmp_path / "no")}) is None
+    assert ArtefactStore(tmp_path).recorded_log(replace(record, log_sha256="0" * 64)) is None
+    assert ArtefactStore(tmp_path).recorded_log(replace(record, log=str(tmp_path / "no"))) is None
 
 
 def test_a_refused_analysis_leaves_no_folder(tmp_path):
@@ -114,9 +115,9 @@ def test_a_record_of_another_window_is_not_the_default_analysis(tmp_path):
     log = store.run(_spec("a"), quiet=True).log
     chosen = store.analysis(log, window_start=0.1, quiet=True)
     assert not chosen.reused
-    assert chosen.record["window"]["start_step"] == round(0.1 / log.spec.mission.dt)
+    assert chosen.record.window.start_step == round(0.1 / log.spec.mission.dt)
     again = ArtefactStore(tmp_path).analysis(log, quiet=True)
-    assert not again.reused and again.record["window"]["start_step"] == log.rows // 2
+    assert not again.reused and again.record.window.start_step == log.rows // 2
     assert ArtefactStore(tmp_path).analysis(log, quiet=True).reused
 
 
@@ -157,8 +158,8 @@ def test_a_comparison_over_another_window_of_the_second_run_is_not_reused(tmp_pa
     b = store.run(_spec("b", **{"mission.duration": 1.2}), quiet=True).log  # 40: at 20
     start = 10 * a.spec.mission.dt  # a's default start, not b's
     chosen = store.analysis(a, b, window_start=start, quiet=True)
-    assert chosen.record["window"]["start_step"] == a.rows // 2
-    assert chosen.record["comparison"]["other"]["window"]["start_step"] != b.rows // 2
+    assert chosen.record.window.start_step == a.rows // 2
+    assert chosen.record.comparison.other.window.start_step != b.rows // 2
     assert not ArtefactStore(tmp_path).analysis(a, b, quiet=True).reused
     assert ArtefactStore(tmp_path).analysis(a, b, quiet=True).reused
 

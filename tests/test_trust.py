@@ -249,7 +249,7 @@ def test_analysis_files_are_a_pair(analysed):
     from pipeline.analysis.record import SCHEMA, read_analysis
 
     rec = read_analysis(analysed / "t3" / "analysis.json")
-    assert rec["schema"] == SCHEMA and len(rec["directions_sha256"]) == 64
+    assert rec.schema == SCHEMA and len(rec.directions_sha256) == 64
 
 
 # -- bounded resources, refused up front (issue 12, item 6) ------------------------------------

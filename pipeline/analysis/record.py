@@ -12,6 +12,7 @@ record last, so a record whose table is missing or is another run's is caught on
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
@@ -21,7 +22,13 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.analysis.schema import check_record
+from pipeline.analysis.schema import (
+    AnalysisRecord,
+    Direction,
+    check_record,
+    record_from_json,
+    to_json,
+)
 from pipeline.artefact_paths import ANALYSIS_FILE, DIRECTIONS_FILE
 from pipeline.atomic_files import atomic_write_bytes, atomic_write_text
 from pipeline.errors import LogError
@@ -35,42 +42,42 @@ RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
 
 
-def _table_bytes(record: dict) -> bytes:
-    rows = record["directions"]
-    table = pa.table({k: np.array([d[k] for d in rows]) for k in rows[0]})
-    table = table.replace_schema_metadata({b"pipeline.log": record["log"].encode()})
+def _table_bytes(record: AnalysisRecord) -> bytes:
+    rows = record.directions
+    table = pa.table({f.name: np.array([getattr(d, f.name) for d in rows])
+                      for f in dataclasses.fields(Direction)})
+    table = table.replace_schema_metadata({b"pipeline.log": record.log.encode()})
     buf = io.BytesIO()
     pq.write_table(table, buf, compression="zstd")
     return buf.getvalue()
 
 
-def write_analysis(record: dict, out_dir: Path) -> Path:
+def write_analysis(record: AnalysisRecord, out_dir: Path) -> Path:
     """Write ``out_dir/<spec name>/analysis.json`` and its ``directions.parquet`` as a set:
     the table first, then the record naming the table's hash (each atomically). If the
     record cannot be written, the new table is removed, so no record points at it."""
-    folder = Path(out_dir) / record["spec_name"]
+    folder = Path(out_dir) / record.spec_name
     table_path, path = folder / TABLE_NAME, folder / RECORD_NAME
-    record = {"schema": SCHEMA, **{k: v for k, v in record.items() if k != "schema"}}
-    problem = check_record({**record, "directions_sha256": None})  # (its value comes below)
+    table = _table_bytes(record) if getattr(record, "directions", None) else None
+    digest = hashlib.sha256(table).hexdigest() if table is not None else None
+    record = dataclasses.replace(record, schema=SCHEMA, directions_sha256=digest)
+    text = json.dumps(to_json(record), indent=1, allow_nan=True) + "\n"
+    problem = check_record(json.loads(text))
     if problem is not None:  # the analysis code's own error: never written, never read back
-        raise ValueError(f"analysis record of {record.get('spec_name')} off its schema: "
-                         f"{problem}")
-    if record.get("directions"):
-        data = _table_bytes(record)
-        record["directions_sha256"] = hashlib.sha256(data).hexdigest()
-        atomic_write_bytes(table_path, data)
+        raise ValueError(f"analysis record of {record.spec_name} off its schema: {problem}")
+    if table is not None:
+        atomic_write_bytes(table_path, table)
     else:  # a diverged log has no per-direction stage: no stale table of an older run
-        record["directions_sha256"] = None
         table_path.unlink(missing_ok=True)
     try:
-        atomic_write_text(path, json.dumps(record, indent=1, allow_nan=True) + "\n")
+        atomic_write_text(path, text)
     except BaseException:
         table_path.unlink(missing_ok=True)
         raise
     return path
 
 
-def read_analysis(path: Path | str) -> dict:
+def read_analysis(path: Path | str) -> AnalysisRecord:
     """A validated analysis record; LogError naming the file and the key otherwise."""
     path = Path(path)
     try:
@@ -98,10 +105,10 @@ def read_analysis(path: Path | str) -> dict:
         if have != digest:
             raise LogError(f"{path}: key directions_sha256: {TABLE_NAME} beside it is not the "
                            f"one written with it")
-    return record
+    return record_from_json(record)
 
 
-def try_read_analysis(path: Path) -> dict | None:
+def try_read_analysis(path: Path) -> AnalysisRecord | None:
     """The record if it reads whole (:func:`read_analysis`), else None: for caches."""
     try:
         return read_analysis(path)

@@ -1,14 +1,20 @@
-"""The analysis record's fields and types (``analysis.json``, schema ``breve-analysis/4``).
+"""The analysis record (``analysis.json``, schema ``breve-analysis/4``): its typed structure,
+its one serialisation, and the check of a record read from disk.
 
-One typed description of the record, two uses:
+The record is a tree of frozen dataclasses (:class:`CompleteRecord` for a complete log,
+:class:`DivergedRecord` for a diverged one). The stages build it, the store writes and reads
+it, and the claims and the reports read its fields by name:
 
-- :func:`check_record`: a record read from disk holds every field its kind (a complete or a
-  diverged log) must hold, with the type it must have, and no other (a LogError naming the
-  file and the field otherwise);
-- :func:`field_type`: whether a dotted path names a field of the record (``dominant.lag1``,
-  ``theory.fastest_mode.axis``, ``directions.0.lag1``), and the field's type: the claims
-  register's paths are checked against it when the register is loaded, not when a claim is
-  evaluated.
+- :func:`to_json` / :func:`from_json`: the one serialisation, fields in declaration order
+  (which is the order of ``analysis.json``); a field marked :data:`ABSENT_WHILE_NONE` is
+  left out while it is None (a theory evaluated outside a window has no window counts; a run
+  compared with no other has no comparison);
+- :func:`check_record`: a record read from disk holds every field its kind must hold, with
+  the type it must have, and no other (a LogError naming the file and the field otherwise);
+- :func:`field_type`: whether a dotted path names a field (``dominant.lag1``,
+  ``theory.fastest_mode.axis``, ``directions.0.lag1``) and its type: the claims register's
+  paths are checked against it when the register is loaded, not when a claim is evaluated;
+- :func:`value_at`: the value such a path names.
 
 A field typed ``dict[str, float]`` (keyed by a name the data decides, such as a mode's) takes
 any key. Numbers: an ``int`` is a ``float`` field's value too (JSON does not keep the
@@ -18,16 +24,27 @@ difference), a ``bool`` is not a number; NaN and ±inf are floats.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import types
 import typing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Union
+
+from pipeline.analysis.harm import Harm
+from pipeline.sim.robot_file import RobotCard
+
+_OPTIONAL = "optional"
+ABSENT_WHILE_NONE = {_OPTIONAL: True}  # a field's metadata: None in some records, then absent
 
 
 @dataclass(frozen=True)
 class Complex:
     real: float
     imag: float
+
+    @classmethod
+    def of(cls, z: complex) -> Complex:
+        return cls(z.real, z.imag)
 
 
 @dataclass(frozen=True)
@@ -77,7 +94,7 @@ class Eigenvalues:
 
 
 @dataclass(frozen=True)
-class MapSpectrum:
+class SpectrumRecord:
     eig_dominant: Complex
     spectral_radius: float
     eigenvalues: Eigenvalues
@@ -85,8 +102,8 @@ class MapSpectrum:
 
 @dataclass(frozen=True)
 class Maps:
-    explicit: MapSpectrum
-    imex: MapSpectrum
+    explicit: SpectrumRecord
+    imex: SpectrumRecord
 
 
 @dataclass(frozen=True)
@@ -145,8 +162,8 @@ class Theory:
     J_x: list[list[float]]
     K_x: list[list[float]]
     # the window's counts: in a complete log's record only
-    window_steps_below_floor: int | None = None
-    at_or_above_floor: bool | None = None
+    window_steps_below_floor: int | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+    at_or_above_floor: bool | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 
 @dataclass(frozen=True)
@@ -184,58 +201,10 @@ class Metrics:
 
 
 @dataclass(frozen=True)
-class ChannelHarm:
-    rms: float
-    channel: str
-    period2_amplitude: float
-    reversal_share: float
-    reversals_per_s: float
-
-
-@dataclass(frozen=True)
-class AttitudeJitter:
-    jitter_deg: float
-    jitter_deg_max: float
-    at_instants_deg: float
-    between_instants_deg: float
-    step_deg_median: float
-
-
-@dataclass(frozen=True)
-class Harm:
-    bus_torque: ChannelHarm
-    joint_torque: ChannelHarm
-    joint_rate: ChannelHarm
-    attitude: AttitudeJitter
-
-
-@dataclass(frozen=True)
 class Prediction:
     period2_predicted: bool
     period2_measured: bool
     agrees: bool
-
-
-@dataclass(frozen=True)
-class RobotCard:
-    total_mass: float
-    com_b: list[float]
-    bus_mass: float
-    bus_com_b: list[float]
-    bus_inertia: list[list[float]]
-    pan_axis_b: list[float]
-    pan_axis_offset: float
-    I_zz_bus: float
-    D_b: float
-    mu_bus: float
-    dt_star_bus: float
-    roll_axis_offset: float
-    roll_boresight_cos: float
-    roll_camera_offset: float
-    I_roll: float
-    D_o: float
-    mu_roll: float
-    dt_star_roll: float
 
 
 @dataclass(frozen=True)
@@ -284,9 +253,10 @@ class Divergence:
 
 @dataclass(frozen=True, kw_only=True)
 class Identity:
-    """What every record holds: which log, which code."""
+    """What every record holds: which log, which code. ``schema`` is set when the record is
+    written (:mod:`pipeline.analysis.record`), and absent from a compared run's record."""
 
-    schema: str
+    schema: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     spec_name: str
     log: str
     log_sha256: str
@@ -296,12 +266,13 @@ class Identity:
     integrator: str
     dt: float
     n_steps: int
-    directions_sha256: str | None
 
 
 @dataclass(frozen=True, kw_only=True)
 class CompleteRecord(Identity):
-    """The record of a complete log: stages 1–6, and stage 7 when compared."""
+    """The record of a complete log: stages 1–6, and stage 7 when compared.
+    ``directions_sha256``: the hash of the ``directions.parquet`` written with it, set when
+    the record is written."""
 
     window: Window
     provenance: Provenance
@@ -319,12 +290,14 @@ class CompleteRecord(Identity):
     bus_mode: BusMode
     mu_max_log: MuMaxAlong
     modes_along: ModesAlong
-    comparison: Comparison | None = None
+    comparison: Comparison | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+    directions_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """Stage 7: this run against another of the same robot (``other``: its whole record)."""
+    """Stage 7: this run against another of the same robot (``other``: its whole record, as
+    analysed, without the fields only a written record has)."""
 
     against: str
     against_log: str
@@ -332,21 +305,13 @@ class Comparison:
     amplitude_ratio: float
     coverage_diff_pp: float
     table: list[dict[str, Any]]
-    other: OtherRecord
-
-
-@dataclass(frozen=True, kw_only=True)
-class OtherRecord(CompleteRecord):
-    """The compared run's record, inside a comparison: as written by stage 7, without the
-    keys only a written record has."""
-
-    schema: str | None = None
-    directions_sha256: str | None = None
+    other: CompleteRecord
 
 
 @dataclass(frozen=True, kw_only=True)
 class DivergedRecord(Identity):
-    """The record of a diverged log: the divergence stage only."""
+    """The record of a diverged log: the divergence stage only (no directions table: its
+    ``directions_sha256`` is null)."""
 
     status: str
     diverged_step: int
@@ -356,6 +321,11 @@ class DivergedRecord(Identity):
     divergence: Divergence
     theory: Theory
     robot: RobotCard
+    directions_sha256: str | None = None
+
+
+AnalysisRecord = CompleteRecord | DivergedRecord
+WRITTEN_ONLY = ("schema", "directions_sha256")  # fields a written record always holds
 
 
 def record_type(record: dict) -> type:
@@ -363,10 +333,56 @@ def record_type(record: dict) -> type:
     return DivergedRecord if record.get("status") == "diverged" else CompleteRecord
 
 
+# -- the one serialisation ----------------------------------------------------------------
+
+def to_json(value: Any) -> Any:
+    """A record (or any part of one) as JSON values: dataclasses as mappings in field order,
+    an optional field left out while None."""
+    if dataclasses.is_dataclass(value):
+        return {f.name: to_json(v) for f in dataclasses.fields(value)
+                if (v := getattr(value, f.name)) is not None or not f.metadata.get(_OPTIONAL)}
+    if isinstance(value, list | tuple):
+        return [to_json(v) for v in value]
+    if isinstance(value, dict):
+        return {k: to_json(v) for k, v in value.items()}
+    return value
+
+
+def from_json(tp: Any, value: Any) -> Any:
+    """The typed value of ``value`` (JSON, already checked by :func:`check_record`) for type
+    ``tp``; numbers are kept as read, so a record read and written again is the same text."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (Union, types.UnionType):
+        if value is None:
+            return None
+        return from_json(next(a for a in args if a is not type(None)), value)
+    if dataclasses.is_dataclass(tp):
+        hints = _hints(tp)
+        return tp(**{f.name: from_json(hints[f.name], value[f.name])
+                     for f in dataclasses.fields(tp) if f.name in value})
+    if origin is list:
+        return [from_json(args[0], v) for v in value]
+    if origin is dict:
+        return {k: from_json(args[1], v) for k, v in value.items()}
+    return value
+
+
+def record_from_json(record: dict) -> AnalysisRecord:
+    """A checked record read from JSON, typed by its kind."""
+    return from_json(record_type(record), record)
+
+
 # -- checking a record --------------------------------------------------------------------
 
+@functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
+
+
+@functools.cache
+def _present_unless_none(cls: type) -> dict[str, bool]:
+    """Each field's name: whether it is an optional one, absent while None."""
+    return {f.name: bool(f.metadata.get(_OPTIONAL)) for f in dataclasses.fields(cls)}
 
 
 def _is_number(x: Any) -> bool:
@@ -407,8 +423,7 @@ def _problem(value: Any, tp: Any, where: str) -> str | None:
         hints = _hints(tp)
         prefix = f"{where}." if where else ""
         for name, f in fields.items():
-            required = (f.default is dataclasses.MISSING
-                        and f.default_factory is dataclasses.MISSING)
+            required = not f.metadata.get(_OPTIONAL) and f.default is dataclasses.MISSING
             if name not in value:
                 if required:
                     return f"{prefix}{name}: missing"
@@ -421,8 +436,11 @@ def _problem(value: Any, tp: Any, where: str) -> str | None:
 
 
 def check_record(record: dict) -> str | None:
-    """Why ``record`` is not an analysis record of its kind (the first field that is
-    missing, extra or of the wrong type, by its dotted path), or None."""
+    """Why ``record``, as written to disk, is not an analysis record of its kind (the first
+    field that is missing, extra or of the wrong type, by its dotted path), or None."""
+    missing = next((k for k in WRITTEN_ONLY if k not in record), None)
+    if missing is not None:
+        return f"{missing}: missing"
     return _problem(record, record_type(record), "")
 
 
@@ -453,11 +471,16 @@ def field_type(path: str, cls: type = CompleteRecord) -> Any:
 
 
 def value_at(obj: Any, path: str | tuple[str, ...]) -> Any:
-    """The value a path (dotted, or its parts) names in a record or any JSON value: mappings
-    by key, lists by index (negative from the end). A KeyError naming the first part that
-    names nothing. The one way the claims and the reports read a record's field."""
+    """The value a path (dotted, or its parts) names in a record or any JSON value: fields by
+    name, mappings by key, lists by index (negative from the end). A KeyError naming the
+    first part that names nothing (an optional field that is absent included). The way the
+    claims and the reports read a field named by a register's path."""
     for part in path.split(".") if isinstance(path, str) else path:
-        if isinstance(obj, dict) and part in obj:
+        if dataclasses.is_dataclass(obj) and part in (names := _present_unless_none(type(obj))):
+            if names[part] and getattr(obj, part) is None:
+                raise KeyError(part)
+            obj = getattr(obj, part)
+        elif isinstance(obj, dict) and part in obj:
             obj = obj[part]
         elif (isinstance(obj, list) and isinstance(part, str) and part.lstrip("-").isdigit()
               and -len(obj) <= int(part) < len(obj)):

@@ -10,10 +10,12 @@ reported, not used.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
+from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm
@@ -84,16 +86,16 @@ def representative_step(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float
     return Representative(k, rule, below, bool(ok.any()))
 
 
-def require_provenance(path, prov: dict) -> None:
+def require_provenance(path, prov: rs.Provenance) -> None:
     """CheckFailed unless σ_min of the rebuilt Γ matches the logged s_min_G on every step."""
-    if prov["max_abs_s_min_G"] > PROVENANCE_TOL:
+    if prov.max_abs_s_min_G > PROVENANCE_TOL:
         raise CheckFailed(f"{path}: provenance: rebuilt σ_min(Γ) differs from logged s_min_G "
-                          f"by {prov['max_abs_s_min_G']:.3e} at step {prov['worst_step']} "
+                          f"by {prov.max_abs_s_min_G:.3e} at step {prov.worst_step} "
                           f"(tolerance {PROVENANCE_TOL:g})")
 
 
 def analyze_log(log: VerifiedLog, window_start: float | None = None,
-                check: bool = True) -> dict:
+                check: bool = True) -> rs.AnalysisRecord:
     """All single-log stages; returns the analysis record (the content of analysis.json).
     ``log``: a verified log, as the artefact store hands it out
     (:meth:`pipeline.store.door.ArtefactStore.open_log`)."""
@@ -124,8 +126,9 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     srms = signals.step_rms(y)
     dom = int(np.argmax(srms))
     directions = [
-        {"direction": i, "sigma": float(np.median(sigma[:, i])), "rms": float(signals.rms(y[:, i])),
-         "step_rms": float(srms[i]), "lag1": float(lag1[i])}
+        rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
+                     rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
+                     lag1=float(lag1[i]))
         for i in range(y.shape[1])
     ]
 
@@ -134,49 +137,53 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
                        win.start, win.stop)
     rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
     th = theory_at_step(robot, spec, log, win.start + rep.index)
-    th["record"].update(rule=rep.rule, window_steps_below_floor=rep.below_floor,
-                        at_or_above_floor=rep.above_floor)
-    card = robot.card(th["q"])
+    at_rep = replace(th.record, rule=rep.rule, window_steps_below_floor=rep.below_floor,
+                     at_or_above_floor=rep.above_floor)
+    card = robot.card(th.q)
 
     # Stages 5 and 6: alignment of theory and data directions, per-step velocity jump.
     data_dir = signals.dominant_step_direction(cols["v"])
     jumps = signals.velocity_jumps(cols["v"])
-    return {
-        "spec_name": spec.name, "log": str(path), "log_sha256": log.sha256,
-        "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
-        "analysis_version": analysis_version(),
-        "integrator": spec.controller.integrator,
-        "dt": dt, "n_steps": n,
-        "window": {"start_step": win.start, "stop_step": win.stop, "rule": win.rule},
-        "provenance": prov,
-        "directions": directions,
-        "dominant": {"index": dom, "sigma": directions[dom]["sigma"],
-                     "lag1": directions[dom]["lag1"], "step_rms": directions[dom]["step_rms"],
-                     "step_energy_share": float(srms[dom] ** 2 / np.sum(srms**2))},
-        "theory": th["record"],
-        "alignment": {"abs_cos": signals.abs_cos(th["direction"], data_dir),
-                      "theory_direction": th["direction"].tolist(),
-                      "data_direction": data_dir.tolist()},
-        "velocity_jump": {"median": float(np.median(jumps)), "max": float(np.max(jumps))},
-        "bus_rate": bus_rate_statistics(cols["v"][:, 3:6], dt,
-                                        spec.controller.limits.omega_b_acc),
-        "metrics": mission_metrics(cols),
-        "harm": asdict(harm(cols["u_applied"], cols["v"], cols["q"],
-                            cols["attitude_excursion_deg"], dt)),
-        "prediction": prediction(th["record"], directions[dom]["lag1"]),
-        "versions": meta.versions,
-        "robot": asdict(card),
+    top = directions[dom]
+    return rs.CompleteRecord(
+        **_identity(log),
+        window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
+        provenance=prov,
+        directions=directions,
+        dominant=rs.Dominant(index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
+                             step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))),
+        theory=at_rep,
+        alignment=rs.Alignment(abs_cos=signals.abs_cos(th.direction, data_dir),
+                               theory_direction=th.direction.tolist(),
+                               data_direction=data_dir.tolist()),
+        velocity_jump=rs.VelocityJump(median=float(np.median(jumps)),
+                                      max=float(np.max(jumps))),
+        bus_rate=bus_rate_statistics(cols["v"][:, 3:6], dt, spec.controller.limits.omega_b_acc),
+        metrics=mission_metrics(cols),
+        harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
+        prediction=prediction(at_rep, top.lag1),
+        versions=meta.versions,
+        robot=card,
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
-        "bus_mode": {"dt_mu_bus": dt * card.mu_bus, "critical_I_zz": dt * card.D_b / 2},
-        "mu_max_log": mu_max_along(log, dt, card.mu_bus, robot.floor),
-        "modes_along": fastest_modes_along(robot, spec, log),
-    }
+        bus_mode=rs.BusMode(dt_mu_bus=dt * card.mu_bus, critical_I_zz=dt * card.D_b / 2),
+        mu_max_log=mu_max_along(log, dt, card.mu_bus, robot.floor),
+        modes_along=fastest_modes_along(robot, spec, log),
+    )
+
+
+def _identity(log: VerifiedLog) -> dict:
+    """The fields every record opens with: which log, which code."""
+    spec = log.spec
+    return dict(spec_name=spec.name, log=str(log.path), log_sha256=log.sha256,
+                spec_hash=log.meta.spec_hash, sim_version=log.meta.sim_version,
+                analysis_version=analysis_version(), integrator=spec.controller.integrator,
+                dt=spec.mission.dt, n_steps=log.rows)
 
 
 GROWTH_FLOOR = 1e-3  # rad/s: a step of ω_b above the smooth motion's (~1e-5) and rounding
 
 
-def divergence_record(log: VerifiedLog) -> dict:
+def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
     """The divergence stage, the only one a ``diverged`` log gets (eqs. 22, 23): the growth
     of ω_b per step before the v_max clip, against Φ's dominant eigenvalue.
 
@@ -210,30 +217,23 @@ def divergence_record(log: VerifiedLog) -> dict:
     alternating = bool(np.all(np.sign(d[fit][1:]) != np.sign(d[fit][:-1])))
     factor = float(np.exp(slope) * (-1.0 if alternating else 1.0))
     th = theory_at_step(robot, spec, log, int(fit[0]))
-    rec = th["record"]
-    sim = rec["eig_dominant"]["real"]
-    note = rec["note_order"]["eig_dominant"]["real"]
-    return {
-        "spec_name": spec.name, "log": str(path), "log_sha256": log.sha256,
-        "spec_hash": meta.spec_hash, "sim_version": meta.sim_version,
-        "analysis_version": analysis_version(),
-        "integrator": spec.controller.integrator,
-        "dt": spec.mission.dt, "n_steps": n, "status": "diverged",
-        "diverged_step": meta.failed_step, "error": meta.error,
-        "note": f"a diverged log, read up to its divergence step {meta.failed_step}: only "
-                f"the divergence stage runs on it",
-        "provenance": prov,
-        "divergence": {
-            "rule": "ω_b along its dominant step direction; |Δx| ≥ "
-                    f"{GROWTH_FLOOR:g} rad/s before the first limit flag; log-linear fit",
-            "direction": direction.tolist(), "first_limit_step": first,
-            "fit_steps": [int(fit[0]), int(fit[-1]) + 1], "alternating": alternating,
-            "growth_factor": factor, "predicted": sim, "predicted_note_order": note,
-            "ratio": factor / sim, "ratio_note_order": factor / note,
-        },
-        "theory": rec,
-        "robot": asdict(robot.card(th["q"])),
-    }
+    sim = th.record.eig_dominant.real
+    note = th.record.note_order.eig_dominant.real
+    return rs.DivergedRecord(
+        **_identity(log), status="diverged", diverged_step=meta.failed_step, error=meta.error,
+        note=f"a diverged log, read up to its divergence step {meta.failed_step}: only "
+             f"the divergence stage runs on it",
+        provenance=prov,
+        divergence=rs.Divergence(
+            rule="ω_b along its dominant step direction; |Δx| ≥ "
+                 f"{GROWTH_FLOOR:g} rad/s before the first limit flag; log-linear fit",
+            direction=direction.tolist(), first_limit_step=first,
+            fit_steps=[int(fit[0]), int(fit[-1]) + 1], alternating=alternating,
+            growth_factor=factor, predicted=sim, predicted_note_order=note,
+            ratio=factor / sim, ratio_note_order=factor / note),
+        theory=th.record,
+        robot=robot.card(th.q),
+    )
 
 
 BATCH = 8192  # steps per batched SVD: its ~8 temporaries of 12×12 per step stay near 10 MB
@@ -248,7 +248,7 @@ def _batches(chunks, size: int = BATCH):
 
 
 def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
-                        ) -> tuple[dict, np.ndarray, np.ndarray]:
+                        ) -> tuple[rs.Provenance, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
     y (eq. 26) and singular values of Γ over the window (singular vectors only there)."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
@@ -276,12 +276,25 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
     if not ys:
         raise LogError(f"{log.path}: no row's step lies in the analysis window "
                        f"[{win.start}, {win.stop}): the step column is not 0, 1, …")
-    prov = {"max_abs_s_min_G": worst, "worst_step": worst_step, "max_rel_kappa_G": worst_kappa,
-            "tolerance": PROVENANCE_TOL}
+    prov = rs.Provenance(max_abs_s_min_G=worst, worst_step=worst_step,
+                         max_rel_kappa_G=worst_kappa, tolerance=PROVENANCE_TOL)
     return prov, np.concatenate(ys), np.concatenate(sigmas)
 
 
-def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> dict:
+class TheoryAtStep(NamedTuple):
+    record: rs.Theory
+    direction: np.ndarray  # the dominant mode's velocity direction, for the alignment
+    q: np.ndarray  # the step's configuration
+
+
+def _spectrum(m: theory.MapSpectrum) -> rs.SpectrumRecord:
+    return rs.SpectrumRecord(eig_dominant=rs.Complex.of(m.dominant),
+                          spectral_radius=m.spectral_radius,
+                          eigenvalues=rs.Eigenvalues(real=m.eigenvalues.real.tolist(),
+                                                     imag=m.eigenvalues.imag.tolist()))
+
+
+def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> TheoryAtStep:
     """Stage 4 at step k: μ, dt·μ_max, dt*, Φ for both integrators, the dominant mode
     (eqs. 21–24) and its velocity direction for the alignment (eq. 27)."""
     row = log.columns(["q", "v", "x_tilde", "s_min_G"], k, k + 1)
@@ -304,45 +317,40 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit")
     fixes = mode_fixes(M_b, D, dt)
-    record = {
-        "rule": "the given step",
-        "step": k, "t": k * dt, "s_min_G": T.s_min_G, "gamma": gamma,
-        "mu": mu.tolist(), "mu_max": float(mu[-1]), "dt_mu_max": float(dt * mu[-1]),
+    record = rs.Theory(
+        rule="the given step",
+        step=k, t=k * dt, s_min_G=T.s_min_G, gamma=gamma,
+        mu=mu.tolist(), mu_max=float(mu[-1]), dt_mu_max=float(dt * mu[-1]),
         # Two critical steps (eq. 24): the damping-only bound 2/μ_max, and the map's, where
         # the spectral radius of Φ (stiffness included, explicit) reaches 1.
-        "dt_star_damping": theory.critical_step(mu[-1]), "dt_star_map": dt_bis,
-        "regime": theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
-        "rho_modes": theory.amplification(dt, mu, integ).tolist(),
-        "eig_dominant": {"real": own.dominant.real, "imag": own.dominant.imag},
-        "spectral_radius": own.spectral_radius,
-        "update_order": "simulator: x̃ advances with the updated velocity e⁺ (eq. 22)",
-        "note_order": {"rule": "note: x̃ advances with the old velocity e (fully explicit)",
-                       "eig_dominant": {"real": note_map.dominant.real,
-                                        "imag": note_map.dominant.imag},
-                       "spectral_radius": note_map.spectral_radius},
-        "maps": {i: {"eig_dominant": {"real": m.dominant.real, "imag": m.dominant.imag},
-                     "spectral_radius": m.spectral_radius,
-                     "eigenvalues": {"real": m.eigenvalues.real.tolist(),
-                                     "imag": m.eigenvalues.imag.tolist()}}
-                 for i, m in maps.items()},
+        dt_star_damping=theory.critical_step(mu[-1]), dt_star_map=dt_bis,
+        regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
+        rho_modes=theory.amplification(dt, mu, integ).tolist(),
+        eig_dominant=rs.Complex.of(own.dominant),
+        spectral_radius=own.spectral_radius,
+        update_order="simulator: x̃ advances with the updated velocity e⁺ (eq. 22)",
+        note_order=rs.NoteOrder(rule="note: x̃ advances with the old velocity e (fully explicit)",
+                                eig_dominant=rs.Complex.of(note_map.dominant),
+                                spectral_radius=note_map.spectral_radius),
+        maps=rs.Maps(explicit=_spectrum(maps["explicit"]), imex=_spectrum(maps["imex"])),
         # The fastest damping mode named, the gain block that sets it and its fixes (eqs. 21,
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
-        "fastest_mode": {
-            "name": fixes.mode.name, "mu": fixes.mode.mu, "dt_mu": fixes.dt_mu,
-            "axis": fixes.mode.axis, "is_bus_yaw": fixes.mode.axis == BUS_YAW_AXIS,
-            "gain_block": fixes.gain_block, "share": float(fixes.mode.shares[fixes.mode.block]),
-            "gain": fixes.gain, "dt_stable": fixes.dt_stable, "dt_margin": fixes.dt_margin,
-            "gain_stable": fixes.gain_stable, "gain_margin": fixes.gain_margin},
-        "integrator": integ, "dt": dt,
+        fastest_mode=rs.FastestMode(
+            name=fixes.mode.name, mu=fixes.mode.mu, dt_mu=fixes.dt_mu,
+            axis=fixes.mode.axis, is_bus_yaw=fixes.mode.axis == BUS_YAW_AXIS,
+            gain_block=fixes.gain_block, share=float(fixes.mode.shares[fixes.mode.block]),
+            gain=fixes.gain, dt_stable=fixes.dt_stable, dt_margin=fixes.dt_margin,
+            gain_stable=fixes.gain_stable, gain_margin=fixes.gain_margin),
+        integrator=integ, dt=dt,
         # The plant's computation delay (eq. 29): the map above has none; with one step the
         # fastest mode's characteristic equation is z² − z + dt·μ_max = 0 (eq. 24).
-        "delay_steps": spec.mission.plant.delay_steps,
-        "delayed": (theory.delayed_mode(float(dt * mu[-1]))
-                    if spec.mission.plant.delay_steps and integ == "explicit" else None),
-        "M_breve": M_b.tolist(), "D_breve": D.tolist(), "K_breve": K.tolist(),
-        "J_x": J_x.tolist(), "K_x": K_x.tolist(),
-    }
-    return {"record": record, "direction": direction, "q": row["q"][0]}
+        delay_steps=spec.mission.plant.delay_steps,
+        delayed=(theory.delayed_mode(float(dt * mu[-1]))
+                 if spec.mission.plant.delay_steps and integ == "explicit" else None),
+        M_breve=M_b.tolist(), D_breve=D.tolist(), K_breve=K.tolist(),
+        J_x=J_x.tolist(), K_x=K_x.tolist(),
+    )
+    return TheoryAtStep(record, direction, row["q"][0])
 
 
 # A step "at the bound" moves ω_b by dt·a_max within 1 %: the tolerance claim C16 gives the
@@ -350,7 +358,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
 AT_BOUND_REL = 0.01
 
 
-def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> dict:
+def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> rs.BusRate:
     """The bus angular rate ω_b alone: lag-1 of its dominant step-to-step component (eq. 25),
     and its step ‖ω_b,k+1 − ω_b,k‖ against the acceleration saturation's dt·a_max (eq. 16).
 
@@ -371,46 +379,47 @@ def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> dict:
     steps = np.linalg.norm(np.diff(w_b, axis=0), axis=1)
     step = float(np.median(steps))
     bound = dt * acc_bound
-    return {"lag1": float(signals.lag1_autocorrelation(x)), "std": float(x.std()),
-            "step_rms": float(signals.step_rms(x)), "alternating_rms": float(signals.rms(alt)),
-            "step_median": step, "step_bound": bound, "step_ratio": step / bound,
-            "at_bound_share": float(np.mean(steps >= (1.0 - AT_BOUND_REL) * bound))}
+    return rs.BusRate(lag1=float(signals.lag1_autocorrelation(x)), std=float(x.std()),
+                      step_rms=float(signals.step_rms(x)), alternating_rms=float(signals.rms(alt)),
+                      step_median=step, step_bound=bound, step_ratio=step / bound,
+                      at_bound_share=float(np.mean(steps >= (1.0 - AT_BOUND_REL) * bound)))
 
 
-def prediction(theory_record: dict, lag1: float) -> dict:
+def prediction(theory_record: rs.Theory, lag1: float) -> rs.Prediction:
     """Does the theory's prediction agree with the data (eqs. 22, 24, 25)? Predicted period-2:
     the map Φ of the run's integrator has a dominant eigenvalue that is real, negative and
     outside the unit circle, and the plant applies the command without delay (with one step
     of it the fastest mode's roots of z² − z + dt·μ = 0 are never real and negative).
     Measured period-2: the dominant direction's lag-1 is negative. NaN agrees with nothing."""
-    eig = theory_record["eig_dominant"]
-    predicted = bool(eig["real"] < 0 and abs(eig["imag"]) <= 1e-9 * abs(eig["real"])
-                     and theory_record["spectral_radius"] > 1
-                     and not theory_record.get("delayed"))
+    eig = theory_record.eig_dominant
+    predicted = bool(eig.real < 0 and abs(eig.imag) <= 1e-9 * abs(eig.real)
+                     and theory_record.spectral_radius > 1
+                     and theory_record.delayed is None)
     measured = bool(lag1 < 0)
-    return {"period2_predicted": predicted, "period2_measured": measured,
-            "agrees": bool(np.isfinite(lag1) and predicted == measured)}
+    return rs.Prediction(period2_predicted=predicted, period2_measured=measured,
+                         agrees=bool(np.isfinite(lag1) and predicted == measured))
 
 
-def mu_max_along(log: VerifiedLog, dt: float, mu_bus: float, floor: float) -> dict:
+def mu_max_along(log: VerifiedLog, dt: float, mu_bus: float, floor: float
+                 ) -> rs.MuMaxAlong:
     """μ_max = dt_mu_max/dt over every logged step against the closed form μ_bus = D_b/I_zz,bus
     (eq. 21): its range, the largest relative deviation, and how near the log came to the
     singularity (the smallest s_min_J and s_min_G, and the damped inverse's floor, eq. 6)."""
     c = log.columns(["dt_mu_max", "s_min_J", "s_min_G"])
     mu = c["dt_mu_max"] / dt
     dev = np.abs(mu / mu_bus - 1.0)
-    return {"min": float(mu.min()), "max": float(mu.max()), "closed_form": mu_bus,
-            "max_rel_dev": float(dev.max()), "worst_step": int(np.argmax(dev)),
-            "steps": int(mu.size), "s_min_J_min": float(c["s_min_J"].min()),
-            "s_min_G_min": float(c["s_min_G"].min()), "floor": floor,
-            "steps_below_floor": int(np.sum(c["s_min_J"] < floor))}
+    return rs.MuMaxAlong(min=float(mu.min()), max=float(mu.max()), closed_form=mu_bus,
+                         max_rel_dev=float(dev.max()), worst_step=int(np.argmax(dev)),
+                         steps=int(mu.size), s_min_J_min=float(c["s_min_J"].min()),
+                         s_min_G_min=float(c["s_min_G"].min()), floor=floor,
+                         steps_below_floor=int(np.sum(c["s_min_J"] < floor)))
 
 
 MODE_SAMPLES = 60  # steps, evenly spaced over the log, at which every damping mode is named
 
 
 def fastest_modes_along(robot: GiordanoRobot, spec: Spec, log: VerifiedLog,
-                        samples: int = MODE_SAMPLES) -> dict:
+                        samples: int = MODE_SAMPLES) -> rs.ModesAlong:
     """The fastest damping mode of M̆⁻¹D̆ named at ``samples`` steps spread evenly over the
     whole log (eq. 21), M̆ rebuilt from the logged (q, v), D̆ from the gains and the logged γ:
     how often each mode is the fastest, and the largest dt·μ_max with its step and mode. The
@@ -426,21 +435,22 @@ def fastest_modes_along(robot: GiordanoRobot, spec: Spec, log: VerifiedLog,
         names.append(fastest.name)
         dt_mus.append(dt * fastest.mu)
     worst = int(np.argmax(dt_mus))
-    return {"samples": int(steps.size),
-            "share": {name: names.count(name) / len(names) for name in dict.fromkeys(names)},
-            "dt_mu_max": float(dt_mus[worst]), "step_of_max": int(steps[worst]),
-            "name_at_max": names[worst], "dt_mu_min": float(min(dt_mus))}
+    return rs.ModesAlong(
+        samples=int(steps.size),
+        share={name: names.count(name) / len(names) for name in dict.fromkeys(names)},
+        dt_mu_max=float(dt_mus[worst]), step_of_max=int(steps[worst]),
+        name_at_max=names[worst], dt_mu_min=float(min(dt_mus)))
 
 
-def mission_metrics(cols: dict[str, np.ndarray]) -> dict:
+def mission_metrics(cols: dict[str, np.ndarray]) -> rs.Metrics:
     """Window metrics: pointing and boresight errors, coverage, and how often each limit bound."""
-    return {
-        "pointing_err_deg_max": float(cols["pointing_err_deg"].max()),
-        "boresight_err_deg_max": float(cols["boresight_err_deg"].max()),
-        "coverage_final": float(cols["coverage"][-1]),
-        "dt_mu_max_window_max": float(cols["dt_mu_max"].max()),
-        "limit_share": {f: float(cols[f].mean()) for f in LIMIT_FLAGS},
-    }
+    return rs.Metrics(
+        pointing_err_deg_max=float(cols["pointing_err_deg"].max()),
+        boresight_err_deg_max=float(cols["boresight_err_deg"].max()),
+        coverage_final=float(cols["coverage"][-1]),
+        dt_mu_max_window_max=float(cols["dt_mu_max"].max()),
+        limit_share={f: float(cols[f].mean()) for f in LIMIT_FLAGS},
+    )
 
 
 COMPARE_ROWS = (
@@ -468,17 +478,17 @@ COMPARE_ROWS = (
 )
 
 
-def compare(a: dict, b: dict) -> dict:
-    """Stage 7: the two runs side by side, the lag-1 flip and the amplitude ratio."""
-    la, lb = a["dominant"]["lag1"], b["dominant"]["lag1"]
-    return {
-        "against": b["spec_name"], "against_log": b["log"],
+def compare(a: rs.CompleteRecord, b: rs.CompleteRecord) -> rs.Comparison:
+    """Stage 7: the two runs side by side, the lag-1 flip and the amplitude ratio. ``b`` is
+    kept whole, as analysed (the fields only a written record has are dropped)."""
+    la, lb = a.dominant.lag1, b.dominant.lag1
+    return rs.Comparison(
+        against=b.spec_name, against_log=b.log,
         # NaN flips nothing: the sign of an undefined lag-1 is no evidence.
-        "lag1_flip": bool(np.isfinite(la) and np.isfinite(lb) and np.sign(la) != np.sign(lb)),
-        "amplitude_ratio": a["velocity_jump"]["median"] / b["velocity_jump"]["median"],
-        "coverage_diff_pp": 100 * abs(a["metrics"]["coverage_final"]
-                                      - b["metrics"]["coverage_final"]),
-        "table": [{"quantity": label, a["spec_name"]: value_at(a, p),
-                   b["spec_name"]: value_at(b, p)} for label, p in COMPARE_ROWS],
-        "other": b,
-    }
+        lag1_flip=bool(np.isfinite(la) and np.isfinite(lb) and np.sign(la) != np.sign(lb)),
+        amplitude_ratio=a.velocity_jump.median / b.velocity_jump.median,
+        coverage_diff_pp=100 * abs(a.metrics.coverage_final - b.metrics.coverage_final),
+        table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}
+               for label, p in COMPARE_ROWS],
+        other=replace(b, schema=None, directions_sha256=None, comparison=None),
+    )

@@ -5,35 +5,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
+
 
 def _num(x: float | None) -> str:
     return "none" if x is None else f"{x:.4g}"
 
 
-def _seconds(record: dict) -> tuple[float, float, float]:
+def _seconds(record: CompleteRecord) -> tuple[float, float, float]:
     """(duration, window start, window end) in seconds."""
-    dt, w = record["dt"], record["window"]
-    return record["n_steps"] * dt, w["start_step"] * dt, w["stop_step"] * dt
+    dt, w = record.dt, record.window
+    return record.n_steps * dt, w.start_step * dt, w.stop_step * dt
 
 
-def basis_lines(a: dict, b: dict) -> list[str]:
+def basis_lines(a: CompleteRecord, b: CompleteRecord) -> list[str]:
     """What a comparison compares, in seconds: the robot, dt, integrator, duration and
     windows; the durations and windows when they differ, named as such (a lag-1 of a shorter
     window is a noisier estimate, a different window sees another part of the orbit)."""
     da, sa, ea = _seconds(a)
     db, sb, eb = _seconds(b)
-    robot = a.get("robot", {})
-    lines = [f"  compares {a['spec_name']} with {b['spec_name']}: same robot "
-             f"(I_zz,bus {robot.get('I_zz_bus', float('nan')):.4g} kg·m²), "
-             f"dt {a['dt']:g} s vs {b['dt']:g} s, integrator {a['integrator']} vs "
-             f"{b['integrator']}, duration {da:.4g} s vs {db:.4g} s, window "
+    lines = [f"  compares {a.spec_name} with {b.spec_name}: same robot "
+             f"(I_zz,bus {a.robot.I_zz_bus:.4g} kg·m²), "
+             f"dt {a.dt:g} s vs {b.dt:g} s, integrator {a.integrator} vs "
+             f"{b.integrator}, duration {da:.4g} s vs {db:.4g} s, window "
              f"{sa:.4g}–{ea:.4g} s vs {sb:.4g}–{eb:.4g} s"]
-    if a["dt"] == b["dt"] and a["integrator"] == b["integrator"]:
-        lines.append(f"  note: same dt ({a['dt']:g} s) and integrator: the comparison tests "
+    if a.dt == b.dt and a.integrator == b.integrator:
+        lines.append(f"  note: same dt ({a.dt:g} s) and integrator: the comparison tests "
                      f"neither the step nor the integrator")
     # Equal to within a step of the coarser run: a window that starts at step n//2 of each
     # run starts at times one step apart at most, which is no difference of substance.
-    step = max(a["dt"], b["dt"])
+    step = max(a.dt, b.dt)
     if abs(da - db) > step:
         lines.append(f"  note: different durations ({da:.4g} s vs {db:.4g} s)")
     if abs(sa - sb) > step or abs(ea - eb) > step:
@@ -41,27 +42,27 @@ def basis_lines(a: dict, b: dict) -> list[str]:
     return lines
 
 
-def summary_lines(record: dict, path: Path) -> list[str]:
+def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
     """What ``analyze`` prints of a record written to ``path``: the headline numbers, and for
     a comparison what it compares (:func:`basis_lines`)."""
-    if record.get("status") == "diverged":
-        g = record["divergence"]
-        return [f"{record['spec_name']}: {record['note']}; ω_b grows by "
-                f"{g['growth_factor']:+.4g} per step over steps {g['fit_steps'][0]}–"
-                f"{g['fit_steps'][1]}, Φ predicts {g['predicted']:+.4g} (simulator's order; "
-                f"{g['predicted_note_order']:+.4g} under the note's) -> {path}"]
-    th, dom = record["theory"], record["dominant"]
-    lines = [f"{record['spec_name']}: dominant lag-1 {dom['lag1']:+.3f} (σ {dom['sigma']:.3g}), "
-             f"dt·μ_max {th['dt_mu_max']:.3g}, dt*_damping {th['dt_star_damping']:.4g} s, "
-             f"dt*_map {_num(th['dt_star_map'])} s, dominant eigenvalue "
-             f"{th['eig_dominant']['real']:+.3f}{th['eig_dominant']['imag']:+.3f}j, "
-             f"|cos| {record['alignment']['abs_cos']:.3f}, median ‖Δv‖ "
-             f"{record['velocity_jump']['median']:.3g} (m/s, rad/s mixed), provenance "
-             f"{record['provenance']['max_abs_s_min_G']:.1e} -> {path}"]
-    if "comparison" in record:
-        c = record["comparison"]
-        lines.append(f"  vs {c['against']}: lag-1 flip {c['lag1_flip']}, ‖Δv‖ ratio "
-                     f"{c['amplitude_ratio']:.3g}, coverage difference "
-                     f"{c['coverage_diff_pp']:.2f} pp")
-        lines += basis_lines(record, c["other"])
+    if not isinstance(record, CompleteRecord):
+        g = record.divergence
+        return [f"{record.spec_name}: {record.note}; ω_b grows by "
+                f"{g.growth_factor:+.4g} per step over steps {g.fit_steps[0]}–"
+                f"{g.fit_steps[1]}, Φ predicts {g.predicted:+.4g} (simulator's order; "
+                f"{g.predicted_note_order:+.4g} under the note's) -> {path}"]
+    th, dom = record.theory, record.dominant
+    lines = [f"{record.spec_name}: dominant lag-1 {dom.lag1:+.3f} (σ {dom.sigma:.3g}), "
+             f"dt·μ_max {th.dt_mu_max:.3g}, dt*_damping {th.dt_star_damping:.4g} s, "
+             f"dt*_map {_num(th.dt_star_map)} s, dominant eigenvalue "
+             f"{th.eig_dominant.real:+.3f}{th.eig_dominant.imag:+.3f}j, "
+             f"|cos| {record.alignment.abs_cos:.3f}, median ‖Δv‖ "
+             f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
+             f"{record.provenance.max_abs_s_min_G:.1e} -> {path}"]
+    if record.comparison is not None:
+        c = record.comparison
+        lines.append(f"  vs {c.against}: lag-1 flip {c.lag1_flip}, ‖Δv‖ ratio "
+                     f"{c.amplitude_ratio:.3g}, coverage difference "
+                     f"{c.coverage_diff_pp:.2f} pp")
+        lines += basis_lines(record, c.other)
     return lines

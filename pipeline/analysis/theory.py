@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.analysis.schema import Complex, DelayedRoot
 from pipeline.sim.breve_controller import damping_rates  # noqa: F401  (μ, eq. 21)
 from pipeline.sim.rotations import skew
 from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24)
@@ -63,11 +64,11 @@ def delayed_damping_root(dt_mu: float) -> complex:
     return complex(max(np.roots([1.0, -1.0, dt_mu]), key=lambda z: (abs(z), z.imag)))
 
 
-def delayed_mode(dt_mu: float) -> dict:
+def delayed_mode(dt_mu: float) -> DelayedRoot:
     """The fastest damping mode under one step of delay (eq. 24): its dominant root, modulus,
     and the oscillation's period in steps (inf for a real root)."""
     z = delayed_damping_root(dt_mu)
     angle = abs(np.angle(z))
-    return {"root": {"real": z.real, "imag": z.imag}, "modulus": abs(z),
-            "period_steps": float(2 * np.pi / angle) if angle > 0 else float("inf"),
-            "stable": bool(abs(z) < 1)}
+    return DelayedRoot(root=Complex.of(z), modulus=abs(z),
+                       period_steps=float(2 * np.pi / angle) if angle > 0 else float("inf"),
+                       stable=bool(abs(z) < 1))

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.analysis.schema import value_at
+from pipeline.analysis.schema import AnalysisRecord, to_json, value_at
 from pipeline.analysis.signals import lag1_autocorrelation
 from pipeline.artefact_paths import log_path
 from pipeline.claims.record import CheckEval, ClaimEval, read_claims_json, write_claims_json
@@ -61,7 +61,7 @@ def log_statistic(run: StoredRun, start: int, group: str, stat: str) -> float:
 def dig(obj: Any, path: str, what: str) -> Any:
     """:func:`pipeline.analysis.schema.value_at`, a missing key a SpecError naming ``what``."""
     try:
-        return value_at(obj, path)
+        return to_json(value_at(obj, path))  # a leaf as it is, a part of a record as JSON
     except KeyError as exc:
         raise SpecError(f"no key {exc.args[0]!r} in {what}") from None
 
@@ -75,7 +75,7 @@ class Context:
         self.here = Path(cf.source).resolve().parent
         self.store = ArtefactStore(self.logs, self.out)
         self.runs: dict[str, StoredRun] = {}
-        self.analyses: dict[str, dict] = {}
+        self.analyses: dict[str, AnalysisRecord] = {}
         self._cross: dict | None = None
         # The CrossCheck itself, for a report in this process (`pipeline all`).
         self.cross_check_result: CrossCheck | None = None
@@ -191,7 +191,7 @@ class Context:
         run, record = self.runs[source], self.analyses[source]
         prov = {"source": source, "spec": run.spec.name, "spec_hash": run.meta.spec_hash,
                 "sim_version": run.meta.sim_version,
-                "analysis_version": record.get("analysis_version", ""),
+                "analysis_version": record.analysis_version,
                 "log": display_path(run.path),
                 "versions": ", ".join(f"{k} {v}" for k, v in
                                       sorted((run.meta.versions or {}).items()))}
@@ -200,7 +200,7 @@ class Context:
             return dig(run.spec.model_dump(mode="json"), rest, f"the spec of {source}"), prov
         if head == "log":
             group, stat = rest.split(".")
-            start = record["window"]["start_step"]
+            start = record.window.start_step
             return log_statistic(run, start, group, stat), prov
         return dig(record, path, f"the analysis.json of {source}"), prov
 

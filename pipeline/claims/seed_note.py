@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from pipeline.analysis.schema import value_at
+from pipeline.analysis.schema import AnalysisRecord, field_type, value_at
 from pipeline.errors import SpecError
 from pipeline.paths import SHIPPED_SPECS
 from pipeline.yamlfile import read_yaml
@@ -80,10 +80,18 @@ def load_note(path: Path | str) -> SeedNote:
     missing = [c for c in COLUMNS if c not in note.runs]
     if missing:
         raise SpecError(f"{path}: field runs: no run for column {missing[0]}")
+    for i, r in enumerate(note.rows):  # our values' paths name fields of the record, now
+        for where, record_path in (("ours", r.ours), *((f"also.{k}", v)
+                                                        for k, v in r.also.items())):
+            try:
+                field_type(record_path)
+            except KeyError as exc:
+                raise SpecError(f"{path}: field rows.{i}.{where}: {record_path!r} has no "
+                                f"field {exc.args[0]!r} in the analysis record") from None
     return note
 
 
-def _number_at(record: dict, path: str) -> float | None:
+def _number_at(record: AnalysisRecord, path: str) -> float | None:
     """Our number at ``path`` of a record, or None where the record has none."""
     try:
         node = value_at(record, path)
@@ -174,7 +182,7 @@ def judgement(claims: list[dict], key: str, column: str, path: str) -> Judgement
                      chosen.get("reason", "") if chosen.get("expect") == "open" else "")
 
 
-def note_table(note: SeedNote, records: dict[str, dict],
+def note_table(note: SeedNote, records: dict[str, AnalysisRecord],
                claims: list[dict] | None = None) -> list[TableRow]:
     """The note's rows beside our values from ``records`` (column → analysis record), each
     cell judged by ``claims`` (claims.json's, whose runs are named as the columns) when

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import MaxNLocator
 
+from pipeline.analysis.schema import AnalysisRecord
 from pipeline.atomic_files import atomic_write_bytes
 from pipeline.errors import LogError
 from pipeline.logs import VerifiedLog
@@ -45,7 +46,7 @@ class RunData:
     is gone, damaged or re-run since), and the log of the run it is compared with (likewise)."""
 
     name: str
-    record: dict
+    record: AnalysisRecord
     log: VerifiedLog | None
     spec: dict  # the resolved spec from the log's metadata ({} without a log)
     folder: str  # the folder of analysis.json under the report root
@@ -203,24 +204,24 @@ def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
 def divergence_growth(run: RunData, path: Path) -> None:
     """|Δω_b| per step of a diverged run on a log scale, with the fitted and the predicted
     growth (eqs. 22, 23)."""
-    g = run.record["divergence"]
+    g = run.record.divergence
     c = _cols(run, ["v_breve"])
-    x = c["v_breve"][:, 0:3] @ np.array(g["direction"])
+    x = c["v_breve"][:, 0:3] @ np.array(g.direction)
     d = np.abs(np.diff(x))
     k = np.arange(d.size)
     fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
     ax.semilogy(k, np.maximum(d, 1e-300), "o-", ms=4, lw=0.8, color="0.3",
                 label="|x_{k+1} − x_k|, x = ω_b along its step direction")
-    k0, k1 = g["fit_steps"]
+    k0, k1 = g.fit_steps
     ref = d[k0]
     kk = np.arange(k0, k1)
-    for factor, style, what in ((g["predicted"], "--", "Φ, simulator's update order"),
-                                (g["predicted_note_order"], ":", "Φ, the note's update order")):
+    for factor, style, what in ((g.predicted, "--", "Φ, simulator's update order"),
+                                (g.predicted_note_order, ":", "Φ, the note's update order")):
         ax.semilogy(kk, ref * abs(factor) ** (kk - k0), style, lw=1.2,
                     label=f"{what}: ×{abs(factor):.4g} per step")
-    ax.axvline(g["first_limit_step"], color="r", lw=0.8,
-               label=f"first limit flag (step {g['first_limit_step']})")
-    ax.set(title=label(f"{run.name}: growth per step {g['growth_factor']:+.4g} (measured)"),
+    ax.axvline(g.first_limit_step, color="r", lw=0.8,
+               label=f"first limit flag (step {g.first_limit_step})")
+    ax.set(title=label(f"{run.name}: growth per step {g.growth_factor:+.4g} (measured)"),
            xlabel="step k", ylabel="|Δω_b| per step (rad/s)")
     ax.legend(loc="upper left")
     _save(fig, path)
@@ -231,11 +232,11 @@ def lag1_directions(runs: list[RunData], path: Path,
     """Lag-1 autocorrelation of each singular direction of Γ (eq. 26), one row per run, its
     value written in its cell and the dominant direction framed: readable for any number of
     runs (bars side by side were not, past four)."""
-    n_dir = max((len(r.record["directions"]) for r in runs), default=0)
+    n_dir = max((len(r.record.directions) for r in runs), default=0)
     grid = np.full((len(runs), n_dir), np.nan)
     for j, r in enumerate(runs):
-        d = r.record["directions"]
-        grid[j, :len(d)] = [e["lag1"] for e in d]
+        d = r.record.directions
+        grid[j, :len(d)] = [e.lag1 for e in d]
     fig, ax = plt.subplots(figsize=(9, 1.2 + 0.42 * len(runs)), layout="constrained")
     im = ax.imshow(grid, cmap="RdBu", vmin=-1.0, vmax=1.0, aspect="auto")
     for j, r in enumerate(runs):
@@ -243,7 +244,7 @@ def lag1_directions(runs: list[RunData], path: Path,
             if np.isfinite(grid[j, i]):
                 ax.text(i, j, f"{grid[j, i]:+.2f}", ha="center", va="center", fontsize=8,
                         color="w" if abs(grid[j, i]) > 0.6 else "k")
-        dom = r.record["dominant"]["index"]
+        dom = r.record.dominant.index
         ax.add_patch(plt.Rectangle((dom - 0.5, j - 0.5), 1, 1, fill=False, lw=2.0, ec="k"))
     ax.set_yticks(range(len(runs)), [label(r.name) for r in runs])
     ax.set_xticks(range(n_dir))
@@ -256,20 +257,21 @@ def lag1_directions(runs: list[RunData], path: Path,
 
 def eigenvalues(run: RunData, path: Path) -> None:
     """Eigenvalues of the 18×18 map for both integrators, against the unit circle."""
-    th = run.record["theory"]
+    th = run.record.theory
     fig, ax = plt.subplots(figsize=(5, 5), layout="constrained")
     t = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(t), np.sin(t), "k-", lw=0.8, label="unit circle")
     # Black and grey: here the marks are the integrators, and the colours of the runs (the
     # palette) would say "another run".
     for integ, mk, col in (("explicit", "x", "k"), ("imex", "o", "0.5")):
-        ev = th["maps"][integ]["eigenvalues"]
-        ax.plot(ev["real"], ev["imag"], mk, color=col, mfc="none", ms=7,
-                label=f"{integ}: ρ = {th['maps'][integ]['spectral_radius']:.4g}")
-    lim = max(1.2, 1.1 * max(m["spectral_radius"] for m in th["maps"].values()))
+        spectrum = getattr(th.maps, integ)
+        ev = spectrum.eigenvalues
+        ax.plot(ev.real, ev.imag, mk, color=col, mfc="none", ms=7,
+                label=f"{integ}: ρ = {spectrum.spectral_radius:.4g}")
+    lim = max(1.2, 1.1 * max(th.maps.explicit.spectral_radius, th.maps.imex.spectral_radius))
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=f"Re λ ({DIMLESS})",
            ylabel=f"Im λ ({DIMLESS})",
-           title=label(f"Φ at step {th['step']} of {run.name} (dt {th['dt']:g} s)"))
+           title=label(f"Φ at step {th.step} of {run.name} (dt {th.dt:g} s)"))
     ax.legend(loc="lower left")
     _save(fig, path)
 
@@ -340,7 +342,7 @@ def dt_mu(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
     for j, r in enumerate(runs):
         c = _cols(r, ["t", "dt_mu_max"])
         ax.plot(c["t"], c["dt_mu_max"],
-                label=label(f"{r.name} ({r.record.get('integrator', '?')})"),
+                label=label(f"{r.name} ({r.record.integrator})"),
                 **_line_kw(styles[r.name], j, n, len(c["t"])))
     ax.axhline(2.0, color="k", lw=1.0, ls="--", label="2: forward-Euler bound")
     ax.set(title="dt·μ_max over the mission", xlabel="t (s)",
@@ -502,22 +504,22 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
     a2.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
     locus_dts = np.geomspace(0.002, 0.05, 60)
     for r in runs:
-        th = r.record["theory"]
-        fm = th["fastest_mode"]
+        th = r.record.theory
+        fm = th.fastest_mode
         s = st[r.name]
-        mk = "*" if th["integrator"] == "explicit" else "P"
-        a1.plot(th["dt"], fm["mu"], mk, ms=11, color=s.color,
-                label=f"{r.name}: {fm['name']} ({th['integrator']})")
-        if th["integrator"] != "explicit":
+        mk = "*" if th.integrator == "explicit" else "P"
+        a1.plot(th.dt, fm.mu, mk, ms=11, color=s.color,
+                label=f"{r.name}: {fm.name} ({th.integrator})")
+        if th.integrator != "explicit":
             continue
-        M, D, K_x, J_x = (np.asarray(th[k]) for k in ("M_breve", "D_breve", "K_x", "J_x"))
+        M, D, K_x, J_x = (np.asarray(m) for m in (th.M_breve, th.D_breve, th.K_x, th.J_x))
         ev = np.array([np.linalg.eigvals(discrete_map(M, D, K_x, J_x, dt, "explicit"))
                        for dt in locus_dts])
         a2.scatter(ev.real.ravel(), ev.imag.ravel(), s=4, c=np.repeat(locus_dts, ev.shape[1]),
                    cmap="viridis", norm=matplotlib.colors.LogNorm())
-        here = np.linalg.eigvals(discrete_map(M, D, K_x, J_x, th["dt"], "explicit"))
+        here = np.linalg.eigvals(discrete_map(M, D, K_x, J_x, th.dt, "explicit"))
         a2.plot(here.real, here.imag, "x", ms=8, color=s.color,
-                label=f"{r.name} at dt = {th['dt']:g} s")
+                label=f"{r.name} at dt = {th.dt:g} s")
     a1.set(xscale="log", yscale="log", xlim=(dts[0], dts[-1]), ylim=(10.0, 1e3),
            xlabel="dt (s)", ylabel="μ of the mode (1/s)",
            title=label("Stability of one damping mode under forward Euler"))
@@ -545,8 +547,8 @@ def _pair_series(run: RunData, against: VerifiedLog, styles: dict[str, RunStyle]
                  ) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     """(name, colour, t, x) of a run and of the run it is compared with, x the fastest damping
     mode's reduced coordinate (eq. 21), each log read once; each run in its report colour."""
-    axis = run.record["theory"]["fastest_mode"]["axis"]
-    other = run.record["comparison"]["against"]
+    axis = run.record.theory.fastest_mode.axis
+    other = run.record.comparison.against
     st = styles or palette([run.name, other])
     out = []
     for name, log, color in ((run.name, run.log, st[run.name].color),
@@ -562,8 +564,8 @@ def startup_growth(run: RunData, against: VerifiedLog, path: Path,
     run and of the run it is compared with (top), and the size of its alternating part,
     a_k = |x_k − 2x_{k+1} + x_{k+2}|/4 (bottom, log scale), against the growth |λ|^k that Φ's
     dominant eigenvalue predicts (eq. 22) until the saturation holds it."""
-    th = run.record["theory"]
-    axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
+    th = run.record.theory
+    axis, name = th.fastest_mode.axis, th.fastest_mode.name
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), layout="constrained", sharex=True)
     series = _pair_series(run, against, styles)
     for label_, color, t_all, x_all in series:
@@ -572,10 +574,10 @@ def startup_growth(run: RunData, against: VerifiedLog, path: Path,
         a1.plot(t, x, "-o", ms=3, lw=0.9, color=color, label=label_)
         alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
         a2.semilogy(t[:-2], np.maximum(alt, 1e-18), "o", ms=3, color=color, label=label_)
-    if th["integrator"] == "explicit":
+    if th.integrator == "explicit":
         _, _, t, x = series[0]
         alt = np.abs(x[:-2] - 2 * x[1:-1] + x[2:]) / 4
-        lam = abs(complex(th["eig_dominant"]["real"], th["eig_dominant"]["imag"]))
+        lam = abs(complex(th.eig_dominant.real, th.eig_dominant.imag))
         k0 = int(np.argmax(alt > 0))
         k = np.arange(k0, min(len(alt), k0 + 12))
         a2.semilogy(t[k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
@@ -596,8 +598,8 @@ def mode_psd(run: RunData, against: VerifiedLog, path: Path,
     it."""
     from scipy.signal import welch
 
-    th = run.record["theory"]
-    axis, name = th["fastest_mode"]["axis"], th["fastest_mode"]["name"]
+    th = run.record.theory
+    axis, name = th.fastest_mode.axis, th.fastest_mode.name
     fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
     for label_, color, t, x in _pair_series(run, against, styles):
         x = x[len(x) // 2:]

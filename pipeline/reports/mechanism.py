@@ -5,11 +5,11 @@ generalised eigenvector of the D̆ and M̆ stored there); the wording follows th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from pipeline.analysis.schema import value_at
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
 from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
 from pipeline.reports.templating import num
@@ -26,10 +26,10 @@ class Verdict:
     headline: str
 
 
-def damping_mode(theory: dict) -> dict:
+def damping_mode(theory: Theory) -> dict:
     """The fastest damping mode w (D̆ w = μ_max M̆ w, :func:`damping_modes`) and its largest
     component's share of the unit vector w."""
-    fastest = damping_modes(np.array(theory["M_breve"]), np.array(theory["D_breve"]))[0]
+    fastest = damping_modes(np.array(theory.M_breve), np.array(theory.D_breve))[0]
     w = fastest.vector / np.linalg.norm(fastest.vector)
     shares = w**2
     i = int(np.argmax(shares))
@@ -39,33 +39,33 @@ def damping_mode(theory: dict) -> dict:
                        for k in np.argsort(-shares)[:3]]}
 
 
-def verdict(run: dict, other: dict) -> Verdict:
-    th, lag = run["theory"], run["dominant"]["lag1"]
-    explicit = run["integrator"] == "explicit"
-    if explicit and lag < LAG1_PERIOD2 and th["dt_mu_max"] > 2:
-        smooth = other["dominant"]["lag1"] > LAG1_SMOOTH
+def verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
+    th, lag = run.theory, run.dominant.lag1
+    explicit = run.integrator == "explicit"
+    if explicit and lag < LAG1_PERIOD2 and th.dt_mu_max > 2:
+        smooth = other.dominant.lag1 > LAG1_SMOOTH
         # Not "of forward Euler" alone: a plant under the held command rings alike (C30).
         return Verdict("ripple", "Period-2 instability of the velocity damping sampled at "
-                       f"dt = {run['dt']:g} s (dt·μ_max = {th['dt_mu_max']:.3g} > 2)"
+                       f"dt = {run.dt:g} s (dt·μ_max = {th.dt_mu_max:.3g} > 2)"
                        + (", confirmed by the causal test." if smooth else
                           "; the causal test does not remove it."))
     if not explicit and lag > LAG1_SMOOTH:
         return Verdict("fix", "The implicit damping (imex) removes the ripple at the same step "
                        "and gains.")
-    if explicit and lag > LAG1_SMOOTH and th["dt_mu_max"] < 2:
+    if explicit and lag > LAG1_SMOOTH and th.dt_mu_max < 2:
         return Verdict("stable", "No ripple: dt·μ_max is below 2 and the motion is smooth.")
     return Verdict("inconclusive", "The numbers do not match the period-2 mechanism.")
 
 
-def versions(rec: dict) -> str:
+def versions(rec: AnalysisRecord) -> str:
     """The Python and numerical-library versions a record's log was made with, in one line."""
-    v = rec.get("versions") or {}
+    v = getattr(rec, "versions", None) or {}
     return ", ".join(f"{k} {v[k]}" for k in sorted(v)) or "not recorded"
 
 
-def robot_card(rec: dict) -> dict:
+def robot_card(rec: AnalysisRecord) -> dict:
     """The record's robot card with the bus inertia's diagonal, as the templates show it."""
-    card = dict(rec["robot"])
+    card = asdict(rec.robot)
     card["bus_inertia_diag"] = np.diag(np.array(card["bus_inertia"])).tolist()
     return card
 
@@ -96,10 +96,10 @@ HARM_ROWS = (
 )
 
 
-def harm_table(rec: dict, other: dict) -> list[dict]:
+def harm_table(rec: CompleteRecord, other: CompleteRecord) -> list[dict]:
     """Section 7's rows for the pair: each quantity of ``HARM_ROWS``, formatted, with the
     channel it was measured on."""
-    def cell(r: dict, path, channel) -> str:
+    def cell(r: CompleteRecord, path, channel) -> str:
         value = num(value_at(r, path))
         return f"{value} ({value_at(r, channel)})" if channel else value
 
@@ -108,11 +108,11 @@ def harm_table(rec: dict, other: dict) -> list[dict]:
             for label, unit, path, channel in HARM_ROWS]
 
 
-def note_rows(rec: dict, other: dict, claims: dict | None = None) -> list:
+def note_rows(rec: CompleteRecord, other: CompleteRecord, claims: dict | None = None) -> list:
     """The seed note's table beside this pair, when the pair is the note's own (its runs),
     judged by the register's ``claims`` (claims.json) when given."""
     note = load_note(NOTE_FILE)
-    if (rec["spec_name"], other["spec_name"]) != (note.runs["nominal"], note.runs["dt010"]):
+    if (rec.spec_name, other.spec_name) != (note.runs["nominal"], note.runs["dt010"]):
         return []
     return note_table(note, {"nominal": rec, "dt010": other},
                       claims["claims"] if claims else None)
@@ -122,24 +122,24 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     """Everything the mechanism templates show, for ``run`` and its comparison; ``claims``
     (claims.json) judges the seed note's table."""
     rec = run.record
-    comp = rec["comparison"]
-    other = comp["other"]
-    th = rec["theory"]
-    names = (rec["spec_name"], other["spec_name"])
+    comp = rec.comparison
+    other = comp.other
+    th = rec.theory
+    names = (rec.spec_name, other.spec_name)
     rows = [{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
-            for r in comp["table"]]
-    flipped = sum(d["lag1"] > LAG1_SMOOTH for d in other["directions"])
-    limits = sorted(((k, v) for k, v in rec["metrics"]["limit_share"].items() if v > 0),
+            for r in comp.table]
+    flipped = sum(d.lag1 > LAG1_SMOOTH for d in other.directions)
+    limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
     table = note_rows(rec, other, claims)
-    fixes = [o for o in others if o.record["integrator"] == "imex"
-             and o.record["dt"] == rec["dt"] and o.name != run.name]
+    fixes = [o for o in others if o.record.integrator == "imex"
+             and o.record.dt == rec.dt and o.name != run.name]
     return {
         "run": run, "rec": rec, "other": other, "comp": comp, "th": th, "names": names,
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
-        "other_mode": damping_mode(other["theory"]), "limits": limits,
-        "flipped": flipped, "n_directions": len(other["directions"]),
-        "fix_runs": fixes, "diag_D": np.diag(np.array(th["D_breve"])).tolist(),
+        "other_mode": damping_mode(other.theory), "limits": limits,
+        "flipped": flipped, "n_directions": len(other.directions),
+        "fix_runs": fixes, "diag_D": np.diag(np.array(th.D_breve)).tolist(),
         "lag1_period2": LAG1_PERIOD2, "lag1_smooth": LAG1_SMOOTH,
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
         "note_rows": table, "note_labels": names, "note_differences": differences(table),

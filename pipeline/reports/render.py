@@ -19,6 +19,7 @@ from functools import partial
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
+from pipeline.analysis.schema import DivergedRecord
 from pipeline.artefact_paths import CLAIMS_FILE
 from pipeline.atomic_files import atomic_write_text
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
@@ -44,10 +45,10 @@ def load_runs(out: Path) -> list[fg.RunData]:
     for path in sorted(Path(out).glob("*/analysis.json")):
         rec = read_analysis(path)
         log = store.recorded_log(rec)
-        other = (rec.get("comparison") or {}).get("other")
-        against = store.recorded_log(other) if isinstance(other, dict) else None
+        comparison = getattr(rec, "comparison", None)
+        against = store.recorded_log(comparison.other) if comparison is not None else None
         spec = log.meta.spec if log is not None else {}
-        runs.append(fg.RunData(rec["spec_name"], rec, log, spec, path.parent.name, against))
+        runs.append(fg.RunData(rec.spec_name, rec, log, spec, path.parent.name, against))
     return runs
 
 
@@ -59,10 +60,9 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
     skipped: list[str] = []
     # A diverged run (its analysis has no per-direction stage) gets its own growth figure,
     # not a place in the others, whose scales its runaway would swamp.
-    diverged = [r for r in runs if r.record.get("status") == "diverged"]
+    diverged = [r for r in runs if isinstance(r.record, DivergedRecord)]
     runs = [r for r in runs if r not in diverged]
     logged = [r for r in runs if r.log is not None]
-    analysed = [r for r in runs if "directions" in r.record]
     # One palette for the whole report: a run is drawn alike in every figure.
     styles = fg.palette([r.name for r in [*runs, *diverged]])
     if len(logged) < len(runs):
@@ -78,7 +78,7 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
                    "period-2 reads −1, smooth +1."),
-         partial(fg.lag1_directions, analysed, styles=styles), analysed),
+         partial(fg.lag1_directions, runs, styles=styles), runs),
         (fg.Figure("figures/gamma_ramp.png", "γ ramp with the logged s_min_G",
                    "scale_by_svd with the spec's controller.base.conditioning knobs and the "
                    "logged (s_min_G, γ) of each step."),
@@ -90,7 +90,6 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
                    "The online guard's dt·μ_max per step, with the forward-Euler bound 2."),
          partial(fg.dt_mu, logged, styles=styles), logged),
     ]
-    moded = [r for r in analysed if "fastest_mode" in r.record.get("theory", {})]
     global_figs.append((fg.Figure(
         "figures/stability_region.png", "Stability region and the eigenvalue locus",
         "Left: the (dt, μ) plane of one damping mode under forward Euler: unstable above "
@@ -99,9 +98,9 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
         "every sweep point (μ_max at its dt, red squares where its measured lag-1 is "
         "negative). Right: Φ's eigenvalues for each explicit run's linearisation as dt "
         "varies (colour), its own dt marked ×: the dominant one leaves the unit circle at "
-        "−1."), partial(fg.stability_region, moded,
+        "−1."), partial(fg.stability_region, runs,
                         sorted(Path(out).glob("sweeps/*/sweep.parquet")), styles=styles),
-        moded))
+        runs))
     jobs += [(fig, draw) for fig, draw, inputs in global_figs if inputs]
     for r in diverged:
         if r.log is None:
@@ -116,23 +115,23 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
     for r in [*runs, *diverged]:
         jobs.append((fg.Figure(
             f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
-            f"Eigenvalues of the 18×18 map Φ at step {r.record['theory']['step']} of {r.name}, "
+            f"Eigenvalues of the 18×18 map Φ at step {r.record.theory.step} of {r.name}, "
             f"explicit and imex, against the unit circle."), partial(fg.eigenvalues, r)))
     for r in runs:
         against = fg.against_log(r)
         if against is None:
             continue
-        comp = r.record["comparison"]
+        comp = r.record.comparison
         jobs.append((fg.Figure(
             f"figures/startup_{r.folder}.png", f"Start-up of the fastest mode, {r.name}",
             f"The fastest damping mode's coordinate over the first half-second of {r.name} and "
-            f"of {comp['against']}, and its alternating part on a log scale against the growth "
+            f"of {comp.against}, and its alternating part on a log scale against the growth "
             f"Φ's dominant eigenvalue predicts per step, until the saturation holds it."),
             partial(fg.startup_growth, r, against, styles=styles)))
         jobs.append((fg.Figure(
             f"figures/psd_{r.folder}.png", f"Spectrum of the fastest mode, {r.name}",
             f"Power spectral density of the fastest damping mode's coordinate over the window "
-            f"of {r.name} and of {comp['against']}, with each run's Nyquist frequency: a "
+            f"of {r.name} and of {comp.against}, with each run's Nyquist frequency: a "
             f"period-2 ripple is a peak at it."), partial(fg.mode_psd, r, against, styles=styles)))
     for table in sorted(Path(out).glob("sweeps/*/sweep.parquet")):
         name = table.parent.name
@@ -225,7 +224,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
         written = render_cross_check(out, cc)
         mechanisms = []
         for r in runs:
-            if "comparison" not in r.record:  # a single or diverged run has no mechanism pair
+            if getattr(r.record, "comparison", None) is None:  # single or diverged: no pair
                 continue
             ctx = mechanism_context(r, runs, claims)
             folder = out / r.folder

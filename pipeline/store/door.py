@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import sys
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from pipeline.analysis.record import write_analysis
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
 from pipeline.analysis.stages import analyze_log, compare
 from pipeline.artefact_paths import analysis_path, log_path
 from pipeline.errors import LogError, PipelineError, RunFailed, SpecError
@@ -62,7 +63,7 @@ class StoredRun:
 class StoredAnalysis:
     """An analysis record (the content of analysis.json), where it is, whether reused."""
 
-    record: dict
+    record: AnalysisRecord
     path: Path
     reused: bool
 
@@ -124,18 +125,18 @@ class ArtefactStore:
             self._verified[key] = verify_log(Path(path), digest=self.digest)
         return self._verified[key]
 
-    def recorded_log(self, record: dict) -> VerifiedLog | None:
+    def recorded_log(self, record: AnalysisRecord) -> VerifiedLog | None:
         """The log an analysis record names, verified, if it is still the one the record was
         made from (its SHA-256); None when it is gone, damaged or another log (re-run since):
         what is drawn from it would not be the analysed data."""
-        path = Path(str(record.get("log", "")))
+        path = Path(record.log)
         if not path.is_file():
             return None
         try:
             log = self.open_log(path)
         except PipelineError:
             return None
-        return log if log.sha256 == record.get("log_sha256") else None
+        return log if log.sha256 == record.log_sha256 else None
 
     def _forget(self, path: Path) -> None:
         self._verified.pop(Path(path).resolve(), None)
@@ -207,14 +208,15 @@ class ArtefactStore:
         return analysis_path(self.out, log.spec.name)
 
     def current_analysis(self, log: VerifiedLog, against: VerifiedLog | None = None
-                         ) -> dict | None:
+                         ) -> AnalysisRecord | None:
         """The stored analysis record of ``log`` (compared with ``against`` exactly when one
         is given) if this analysis code made it from these logs, else None."""
         return current_analysis(self.analysis_path(log), log, against)
 
     def analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
                  window_start: float | None = None, force: bool = False,
-                 against_record: dict | None = None, quiet: bool = False) -> StoredAnalysis:
+                 against_record: CompleteRecord | None = None, quiet: bool = False
+                 ) -> StoredAnalysis:
         """The analysis record of ``log``, compared with ``against`` (a run of the same robot,
         else a SpecError before any work), reused when current, else computed and written
         under the folder's lock. A chosen ``window_start`` is always computed (the stored
@@ -243,10 +245,10 @@ class ArtefactStore:
 
     @staticmethod
     def _analyse(log: VerifiedLog, against: VerifiedLog | None, window_start: float | None,
-                 against_record: dict | None) -> dict:
+                 against_record: CompleteRecord | None) -> AnalysisRecord:
         record = analyze_log(log, window_start)
         if against is not None:
             other = (against_record if against_record is not None and window_start is None
                      else analyze_log(against, window_start))
-            record["comparison"] = compare(record, other)
+            record = replace(record, comparison=compare(record, other))
         return record

@@ -14,6 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from pipeline.analysis.record import try_read_analysis
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
 from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, DIRECTIONS_FILE, log_path
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, VerifiedLog, read_footer
@@ -63,46 +64,45 @@ def log_is_current(meta: LogMeta, rows: int, spec: Spec,
             and (meta.status != "complete" or rows == spec.n_steps))
 
 
-def _made_from(record: dict, log: VerifiedLog) -> bool:
+def _made_from(record: AnalysisRecord, log: VerifiedLog) -> bool:
     """The record names this log, and its content: a log re-run bitwise keeps its analysis,
     a log changed in any byte does not."""
-    return (Path(str(record.get("log", ""))).resolve() == Path(log.path).resolve()
-            and record.get("spec_hash") == log.meta.spec_hash
-            and record.get("sim_version") == log.meta.sim_version
-            and record.get("log_sha256") == log.sha256)
+    return (Path(record.log).resolve() == Path(log.path).resolve()
+            and record.spec_hash == log.meta.spec_hash
+            and record.sim_version == log.meta.sim_version
+            and record.log_sha256 == log.sha256)
 
 
 def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None
-                     ) -> dict | None:
+                     ) -> AnalysisRecord | None:
     """The analysis record at ``path`` if it was made from this log by this analysis code, over
     the default window, compared with ``against`` exactly when one is given, else None."""
     record = try_read_analysis(path)
-    if (record is None or record.get("analysis_version") != analysis_version()
+    if (record is None or record.analysis_version != analysis_version()
             or not _made_from(record, log)):
         return None
     # A record of another window (``analyze --window-start``) is not the default analysis,
     # nor is a comparison whose second run was analysed over another window.
     if not _default_window(record, log):
         return None
-    comparison = record.get("comparison")
+    comparison = getattr(record, "comparison", None)
     if against is None:
         return record if comparison is None else None
-    other = comparison.get("other", {}) if isinstance(comparison, dict) else None
-    if (not isinstance(other, dict) or not _made_from(other, against)
-            or not _default_window(other, against)):
+    if (comparison is None or not _made_from(comparison.other, against)
+            or not _default_window(comparison.other, against)):
         return None
     return record
 
 
-def _default_window(record: dict, log: VerifiedLog) -> bool:
+def _default_window(record: AnalysisRecord, log: VerifiedLog) -> bool:
     """The record's window is the default one of its log (a diverged log's has none)."""
     from pipeline.analysis.stages import choose_window
 
-    window = record.get("window")
-    if window is None:
+    if not isinstance(record, CompleteRecord):
         return True
     default = choose_window(log.rows, log.spec.mission.dt, None)
-    return (window.get("start_step"), window.get("stop_step")) == (default.start, default.stop)
+    return ((record.window.start_step, record.window.stop_step)
+            == (default.start, default.stop))
 
 
 def current_sweep(table: Path, base_spec_hash: str, points: Iterable[str]) -> bool:

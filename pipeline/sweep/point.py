@@ -17,7 +17,7 @@ import os
 import socket
 import time
 
-from pipeline.analysis.schema import value_at
+from pipeline.analysis.schema import AnalysisRecord, value_at
 from pipeline.errors import PipelineError
 from pipeline.spec import Spec
 
@@ -44,7 +44,7 @@ FIGURES: dict[str, tuple[str, ...]] = {
 }
 
 
-def figures(analysis: dict | None) -> dict[str, float]:
+def figures(analysis: AnalysisRecord | None) -> dict[str, float]:
     """The table's columns of a point's record (NaN where it has none: no record, a failed
     point, a field that is null)."""
     out = {}
