@@ -35,7 +35,7 @@ def typed(short_logs) -> CompleteRecord:
 @pytest.fixture()
 def record(typed) -> dict:
     """The record as JSON, as it is written (with the fields only a written record has)."""
-    return {**to_json(typed), "schema": "s", "directions_sha256": None}
+    return {**to_json(typed), "schema": "s", "directions_sha256": "0" * 64}
 
 
 def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
@@ -65,10 +65,10 @@ def test_the_serialisation_keeps_field_order_and_leaves_out_only_absent_fields(t
     assert "window_steps_below_floor" not in bare and "at_or_above_floor" not in bare
     # A required field that is null stays, as null (no delay: no delayed root).
     assert data["theory"]["delayed"] is None and "delayed" in data["theory"]
-    assert record_from_json({**data, "schema": "s", "directions_sha256": None}) == \
-        dataclasses.replace(typed, schema="s")
-    assert isinstance(record_from_json({**data, "schema": "s",
-                                        "directions_sha256": None}).theory, Theory)
+    written = {**data, "schema": "s", "directions_sha256": "0" * 64}
+    assert record_from_json(written) == dataclasses.replace(typed, schema="s",
+                                                            directions_sha256="0" * 64)
+    assert isinstance(record_from_json(written).theory, Theory)
 
 
 @pytest.mark.parametrize("path,value,needle", [
@@ -85,11 +85,11 @@ def test_a_field_of_the_wrong_type_is_named(record, path, value, needle):
     for part in path[:-1]:
         node = node[part]
     node[path[-1]] = value
-    assert needle in (check_record({**bad, "schema": "s", "directions_sha256": None}) or "")
+    assert needle in (check_record(bad) or "")
 
 
 def test_a_missing_or_extra_field_is_named(record):
-    whole = {**record, "schema": "s", "directions_sha256": None}
+    whole = record
     assert check_record(whole) is None
     assert check_record({k: v for k, v in whole.items() if k != "harm"}) == "harm: missing"
     assert check_record({**whole, "harm2": {}}) == "harm2: not a field of the record"
@@ -105,6 +105,23 @@ def test_a_missing_or_extra_field_is_named(record):
 def test_the_written_only_fields_are_required_on_disk(record):
     for key in ("schema", "directions_sha256"):
         assert check_record({k: v for k, v in record.items() if k != key}) == f"{key}: missing"
+    # A complete log's record has a directions table: its hash is a string, never null.
+    assert check_record({**record, "directions_sha256": None}).startswith(
+        "directions_sha256: null")
+
+
+def test_a_field_with_a_class_default_is_still_required(record):
+    """The robot card's roll fields default to 0.0 in the code; a record without them is not
+    read as μ_roll = 0."""
+    card = {k: v for k, v in record["robot"].items() if k != "mu_roll"}
+    assert check_record({**record, "robot": card}) == "robot.mu_roll: missing"
+
+
+def test_an_absent_field_written_as_null_is_refused(record):
+    assert check_record({**record, "comparison": None}).startswith("comparison: null")
+    theory = {**record["theory"], "window_steps_below_floor": None}
+    assert check_record({**record, "theory": theory}).startswith(
+        "theory.window_steps_below_floor: null")
 
 
 def test_the_off_schema_record_is_never_written(typed, tmp_path):

@@ -24,6 +24,7 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis.schema import (
     AnalysisRecord,
+    CompleteRecord,
     Direction,
     check_record,
     record_from_json,
@@ -42,7 +43,7 @@ RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
 
 
-def _table_bytes(record: AnalysisRecord) -> bytes:
+def _table_bytes(record: CompleteRecord) -> bytes:
     rows = record.directions
     table = pa.table({f.name: np.array([getattr(d, f.name) for d in rows])
                       for f in dataclasses.fields(Direction)})

@@ -423,11 +423,15 @@ def _problem(value: Any, tp: Any, where: str) -> str | None:
         hints = _hints(tp)
         prefix = f"{where}." if where else ""
         for name, f in fields.items():
-            required = not f.metadata.get(_OPTIONAL) and f.default is dataclasses.MISSING
+            # Every field is required but those absent while None, which are never null: a
+            # default of the class (a robot card's) never stands in for a missing value.
+            optional = bool(f.metadata.get(_OPTIONAL))
             if name not in value:
-                if required:
+                if not optional:
                     return f"{prefix}{name}: missing"
                 continue
+            if optional and value[name] is None:
+                return f"{prefix}{name}: null (absent, not null, when there is none)"
             if (p := _problem(value[name], hints[name], f"{prefix}{name}")) is not None:
                 return p
         extra = sorted(set(value) - set(fields))
@@ -437,7 +441,9 @@ def _problem(value: Any, tp: Any, where: str) -> str | None:
 
 def check_record(record: dict) -> str | None:
     """Why ``record``, as written to disk, is not an analysis record of its kind (the first
-    field that is missing, extra or of the wrong type, by its dotted path), or None."""
+    field that is missing, extra, null where it should be absent, or of the wrong type, by its
+    dotted path), or None. A written record holds its schema and its directions table's hash
+    (null only for a diverged log's, which has no table)."""
     missing = next((k for k in WRITTEN_ONLY if k not in record), None)
     if missing is not None:
         return f"{missing}: missing"

@@ -9,6 +9,7 @@ NOW HOLDS (an ``open`` claim that holds: like a strict xfail, exit 1 until it is
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,9 +62,11 @@ def log_statistic(run: StoredRun, start: int, group: str, stat: str) -> float:
 def dig(obj: Any, path: str, what: str) -> Any:
     """:func:`pipeline.analysis.schema.value_at`, a missing key a SpecError naming ``what``."""
     try:
-        return to_json(value_at(obj, path))  # a leaf as it is, a part of a record as JSON
+        value = value_at(obj, path)
     except KeyError as exc:
         raise SpecError(f"no key {exc.args[0]!r} in {what}") from None
+    # A leaf as it is; a part of a record (a dataclass) as the JSON analysis.json holds.
+    return to_json(value) if dataclasses.is_dataclass(value) else value
 
 
 class Context:

@@ -224,9 +224,10 @@ class ArtefactStore:
         the caller has it, so it is not analysed twice."""
         if against is not None:
             check_same_robot(log, against)
-            if log.meta.status == "diverged":
-                raise LogError(f"{log.path}: a diverged log is not compared (--against): only "
-                               f"its divergence stage runs")
+            for one in (log, against):
+                if one.meta.status == "diverged":
+                    raise LogError(f"{one.path}: a diverged log is not compared (--against): "
+                                   f"only its divergence stage runs")
         path = self.analysis_path(log)
         fresh = force or window_start is not None
         old = None if fresh else self.current_analysis(log, against)
