@@ -45,18 +45,52 @@ def _cmd_run(a: argparse.Namespace) -> int:
 def _cmd_analyze(a: argparse.Namespace) -> int:
     from pipeline.analysis.summary import summary_lines
     from pipeline.paths import display_path
+    from pipeline.spec import load_spec
     from pipeline.store.door import ArtefactStore
 
+    controller = load_spec(a.controller) if a.controller else None
     store = ArtefactStore(out=a.out)
     log = store.open_log(a.log)
     other = store.open_log(a.against) if a.against else None
-    done = store.analysis(log, other, a.window_start, force=a.force, quiet=True)
+    done = store.analysis(log, other, a.window_start, force=a.force, quiet=True,
+                          controller=controller)
     if done.reused:
         print(f"{log.spec.name}: up to date (same log and analysis code) -> "
               f"{display_path(done.path)}")
         return 0
     for line in summary_lines(done.record, done.path):
         print(line)
+    return 0
+
+
+def _cmd_import(a: argparse.Namespace) -> int:
+    from pipeline.importer.mapping import load_mapping
+    from pipeline.importer.run import import_log
+    from pipeline.paths import display_path
+
+    def columns(text: str | None) -> str | list[str] | None:
+        return None if text is None else (text.split(",") if "," in text else text)
+
+    mapping_file = Path(a.mapping) if a.mapping else None
+    options = {"format": a.format, "robot": a.robot, "time_unit": a.time_unit, "dt": a.dt,
+               "q": columns(a.q), "v": columns(a.v), "quaternion": a.quaternion,
+               "velocity_frame": a.velocity_frame, "linear_velocity": a.linear_velocity,
+               "angle_unit": a.angle_unit, "length_unit": a.length_unit,
+               "allow_pickle": a.allow_pickle or None}
+    if a.time is not None:
+        options["time"] = None if a.time == "none" else a.time
+    mapping = load_mapping(mapping_file, options)
+    source = Path(a.source)
+    name = a.name or (source.stem if source.suffix else source.name)
+    done = import_log(source, mapping, name, a.out, a.resample,
+                      mapping_file.resolve().parent if mapping_file else None)
+    r = done.check.declared.residuals
+    tb = done.time
+    resampled = (f", resampled from {tb.resampled_from} rows" if tb.resampled_from else
+                 f", stamps within {tb.max_deviation:.2g} s of t0 + k·dt")
+    print(f"{name}: {done.rows} rows at dt {tb.dt:.6g} s{resampled}; robot from {done.robot};"
+          f" q and v agree ({done.check.declared.conventions.describe()}: median residual "
+          f"{r.median_ratio:.2g}× its bound) -> {display_path(done.path)}")
     return 0
 
 
@@ -286,7 +320,60 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--force", action="store_true",
                     help="analyse even when the record is current: same logs and analysis "
                     "code (default: off; e.g. --force)")
+    an.add_argument("--controller", metavar="SPEC",
+                    help="for an imported log: the spec whose controller (gains, integrator, "
+                    "dt) flew it; the damping theory runs only with one (default: none, the "
+                    "data stages alone; e.g. --controller nominal)")
     an.set_defaults(func=_cmd_analyze)
+
+    im = _stage(sub, "import", "import a log another simulator or a spacecraft wrote (CSV, "
+                "Parquet, .npz, ROS 2 bag, MCAP) into DIR/imported/<name>/run.parquet",
+                "states.npz --robot nominal --allow-pickle --q states.q --v states.v "
+                "--time states.t")
+    im.add_argument("source", help="the log file, a ROS 2 bag's folder or an MCAP file "
+                    "(e.g. npz/states_ur3_1.npz)")
+    im.add_argument("--mapping", metavar="FILE",
+                    help="YAML mapping of columns, topics, conventions and robot; the options "
+                    "below override it (default: none; e.g. --mapping precursor.yaml)")
+    im.add_argument("--name", help="the imported log's name (default: the file's stem; "
+                    "e.g. --name precursor_run1)")
+    im.add_argument("--robot", metavar="SPEC",
+                    help="a spec whose robot block the log is of (default: the mapping's; "
+                    "e.g. --robot nominal)")
+    im.add_argument("--format", choices=("csv", "parquet", "npz", "rosbag", "mcap"),
+                    help="the file's format (default: from its suffix; e.g. --format csv)")
+    im.add_argument("--time", metavar="COLUMN",
+                    help="the time stamps' column or key, `none` for a log without them "
+                    "(default: t; e.g. --time states.t)")
+    im.add_argument("--time-unit", choices=("s", "ms", "us", "ns"),
+                    help="the stamps' unit (default: s; e.g. --time-unit ns)")
+    im.add_argument("--dt", type=float, metavar="SECONDS",
+                    help="the step of a log without time stamps (default: none; e.g. --dt 0.03)")
+    im.add_argument("--q", metavar="COLUMN[,…]", help="q's vector column or key, or its 13 "
+                    "scalar columns comma-separated (default: q; e.g. --q states.q)")
+    im.add_argument("--v", metavar="COLUMN[,…]", help="v's, 12 wide (default: v; "
+                    "e.g. --v states.v)")
+    im.add_argument("--quaternion", choices=("xyzw", "wxyz"),
+                    help="the bus quaternion's order (default: xyzw; e.g. --quaternion wxyz)")
+    im.add_argument("--velocity-frame", choices=("bus", "world"),
+                    help="axes of the bus velocities (default: bus; e.g. --velocity-frame world)")
+    im.add_argument("--linear-velocity", choices=("origin", "bus_com"),
+                    help="the point whose linear velocity is logged (default: origin, the bus "
+                    "frame's; e.g. --linear-velocity bus_com)")
+    im.add_argument("--angle-unit", choices=("rad", "deg"),
+                    help="of joint angles and angular rates (default: rad; e.g. --angle-unit deg)")
+    im.add_argument("--length-unit", choices=("m", "mm"),
+                    help="of positions and linear velocities (default: m; e.g. --length-unit mm)")
+    im.add_argument("--resample", type=float, metavar="DT",
+                    help="resample onto this fixed step, recorded (default: an uneven time "
+                    "base is refused; e.g. --resample 0.03)")
+    im.add_argument("--allow-pickle", action="store_true",
+                    help="read pickled objects in a .npz: runs code from the file, so only a "
+                    "file you trust (default: off; e.g. --allow-pickle)")
+    im.add_argument("--out", default="logs", metavar="DIR",
+                    help="log folder; writes DIR/imported/<name>/run.parquet (default: logs; "
+                    "e.g. --out /tmp/logs)")
+    im.set_defaults(func=_cmd_import)
 
     rp = _stage(sub, "report", "render the figures, reports and index.html of a report folder",
                 "--out generated_reports")

@@ -50,6 +50,14 @@ class LogMeta:
     # The platform it ran on (pipeline.platform.Platform.to_dict()); None in a log written
     # before logs recorded it: an unknown platform.
     platform: dict | None = None
+    # Where the log came from: None for the simulator's; for a log the importer wrote, its
+    # ``pipeline.import`` record (the source file, its hash and format, the mapping, the
+    # conventions, the time base and the consistency check; pipeline.importer).
+    imported: dict | None = None
+
+    @property
+    def origin(self) -> str:
+        return "simulated" if self.imported is None else "imported"
 
     @property
     def name(self) -> str:
@@ -157,7 +165,9 @@ def log_metadata(meta: LogMeta) -> dict[str, str]:
                                         sort_keys=True),
         "pipeline.platform": json.dumps(meta.platform or fingerprint().to_dict(),
                                         sort_keys=True),
-    }
+    } | ({} if meta.imported is None else {
+        "pipeline.origin": "imported",
+        "pipeline.import": json.dumps(meta.imported, sort_keys=True)})
 
 
 def _open(path: Path, handle=None) -> pq.ParquetFile:
@@ -210,7 +220,24 @@ def _meta(path: Path, pf: pq.ParquetFile) -> LogMeta:
     return LogMeta(spec, md["pipeline.spec_hash"], md["pipeline.sim_version"],
                    md["pipeline.robot_file"], md["pipeline.robot_hash"], md["pipeline.status"],
                    failed_step, md.get("pipeline.error", ""), rows, versions,
-                   _platform(path, md.get("pipeline.platform")))
+                   _platform(path, md.get("pipeline.platform")), _imported(path, md))
+
+
+def _imported(path: Path, md: dict[str, str]) -> dict | None:
+    """The import record of a log the importer wrote; None for the simulator's."""
+    origin = md.get("pipeline.origin", "simulated")
+    if origin == "simulated":
+        return None
+    if origin != "imported" or "pipeline.import" not in md:
+        raise LogError(f"{path}: metadata key pipeline.origin: {origin!r} without the "
+                       f"pipeline.import record of an imported log")
+    try:
+        record = json.loads(md["pipeline.import"])
+    except json.JSONDecodeError:
+        raise LogError(f"{path}: metadata key pipeline.import is not JSON") from None
+    if not isinstance(record, dict):
+        raise LogError(f"{path}: metadata key pipeline.import is not a mapping")
+    return record
 
 
 def _platform(path: Path, text: str | None) -> dict | None:

@@ -77,7 +77,7 @@ LAYERS = (
      "progress", "provenance", "platform"),
     ("spec", "budget"),
     ("logs",),
-    ("sim",),
+    ("sim", "importer"),
     ("analysis",),
     ("store",),
     ("verify", "sweep"),

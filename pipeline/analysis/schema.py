@@ -180,12 +180,20 @@ class VelocityJump:
 
 
 @dataclass(frozen=True)
-class BusRate:
+class BusRateData:
+    """The bus rate's statistics from the data alone (eq. 25)."""
+
     lag1: float
     std: float
     step_rms: float
     alternating_rms: float
     step_median: float
+
+
+@dataclass(frozen=True)
+class BusRate(BusRateData):
+    """... and its step against the acceleration saturation (eq. 16)."""
+
     step_bound: float
     step_ratio: float
     at_bound_share: float
@@ -324,12 +332,89 @@ class DivergedRecord(Identity):
     directions_sha256: str | None = None
 
 
-AnalysisRecord = CompleteRecord | DivergedRecord
+@dataclass(frozen=True)
+class Origin:
+    """Where an imported log came from (its import record, :mod:`pipeline.importer`)."""
+
+    source: str
+    source_sha256: str
+    format: str
+    robot_from: str
+    conventions: dict[str, str]
+    consistency_median_ratio: float  # the consistency check's median residual/bound (eq. 33)
+
+
+@dataclass(frozen=True)
+class StageRun:
+    stage: str
+    ran: bool
+    why: str
+
+
+@dataclass(frozen=True)
+class Conditioning:
+    """σ_min and κ along the whole log (eq. 19) and the steps below the damped floor (eq. 6)."""
+
+    s_min_G_min: float
+    s_min_G_median: float
+    kappa_G_max: float
+    s_min_J_min: float
+    floor: float
+    steps_below_floor: int
+
+
+@dataclass(frozen=True)
+class DampingTheory:
+    """Stage 4's damping modes at the representative step, from the declared controller
+    (eqs. 21–23): an imported log's theory."""
+
+    controller: str
+    controller_hash: str
+    rule: str
+    step: int
+    t: float
+    s_min_G: float
+    gamma: float
+    mu: list[float]
+    mu_max: float
+    dt_mu_max: float
+    dt_star_damping: float
+    regime: str
+    rho_modes: list[float]
+    fastest_mode: FastestMode
+    M_breve: list[list[float]]
+    D_breve: list[list[float]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ImportedRecord(Identity):
+    """The record of an imported log: its origin, which stages ran and why, the data stages,
+    and the damping theory when a controller was declared (:mod:`pipeline.analysis.imported`)."""
+
+    origin: Origin
+    stages: list[StageRun]
+    window: Window
+    provenance: Provenance
+    directions: list[Direction]
+    dominant: Dominant
+    velocity_jump: VelocityJump
+    bus_rate: BusRateData
+    conditioning: Conditioning
+    damping: DampingTheory | None
+    prediction: Prediction | None
+    versions: dict[str, str]
+    directions_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+
+
+AnalysisRecord = CompleteRecord | DivergedRecord | ImportedRecord
 WRITTEN_ONLY = ("schema", "directions_sha256")  # fields a written record always holds
 
 
 def record_type(record: dict) -> type:
-    """The type of a record as read: a diverged log's, else a complete log's."""
+    """The type of a record as read: an imported log's, a diverged log's, else a complete
+    log's."""
+    if "origin" in record:
+        return ImportedRecord
     return DivergedRecord if record.get("status") == "diverged" else CompleteRecord
 
 

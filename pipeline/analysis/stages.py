@@ -10,7 +10,7 @@ reported, not used.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -100,6 +100,8 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     ``log``: a verified log, as the artefact store hands it out
     (:meth:`pipeline.store.door.ArtefactStore.open_log`)."""
     path, meta, spec = log.path, log.meta, log.spec
+    if meta.origin != "simulated":  # its spec holds no controller: pipeline.analysis.imported
+        raise LogError(f"{path}: an {meta.origin} log: its data stages are analyze_imported's")
     if meta.status == "diverged":
         return divergence_record(log)
     if meta.status != "complete":
@@ -358,15 +360,26 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
 AT_BOUND_REL = 0.01
 
 
-def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> rs.BusRate:
-    """The bus angular rate ω_b alone: lag-1 of its dominant step-to-step component (eq. 25),
-    and its step ‖ω_b,k+1 − ω_b,k‖ against the acceleration saturation's dt·a_max (eq. 16).
+def bus_rate_data(w_b: np.ndarray) -> rs.BusRateData:
+    """The bus angular rate ω_b alone (eq. 25): lag-1 of its dominant step-to-step component
+    x (ω_b projected on its direction of most step-to-step energy), its spread, and its
+    alternating part a = (x_k − 2x_{k+1} + x_{k+2})/4 (exact for a period-2 signal), compared
+    with its standard deviation to say how much of ω_b the ripple is; the median step
+    ‖ω_b,k+1 − ω_b,k‖."""
+    x = w_b @ signals.dominant_step_direction(w_b)
+    alt = (x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+    steps = np.linalg.norm(np.diff(w_b, axis=0), axis=1)
+    return rs.BusRateData(lag1=float(signals.lag1_autocorrelation(x)), std=float(x.std()),
+                          step_rms=float(signals.step_rms(x)),
+                          alternating_rms=float(signals.rms(alt)),
+                          step_median=float(np.median(steps)))
 
-    The component is ω_b projected on its direction of most step-to-step energy; its
-    alternating part, a = (x_k − 2x_{k+1} + x_{k+2})/4 (exact for a period-2 signal), is
-    compared with its standard deviation to say how much of ω_b the ripple is. When the
-    acceleration saturation binds (and the rate one does not), each step moves ω_b by exactly
-    dt·a_max: a limit cycle held by that limit has step_ratio = 1.
+
+def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> rs.BusRate:
+    """:func:`bus_rate_data`, and the step of ω_b against the acceleration saturation's
+    dt·a_max (eq. 16). When the acceleration saturation binds (and the rate one does not),
+    each step moves ω_b by exactly dt·a_max: a limit cycle held by that limit has
+    step_ratio = 1.
 
     at_bound_share is the share of steps that move ω_b by dt·a_max within AT_BOUND_REL: the
     steps at the acceleration bound. The log's flag sat_omega_b_acc (‖request‖ > a_max) cannot
@@ -374,14 +387,10 @@ def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> rs.BusR
     falls short of a_max by a few parts in 10⁷ (measured on the seed robot), the step then at
     the bound but the flag clear.
     """
-    x = w_b @ signals.dominant_step_direction(w_b)
-    alt = (x[:-2] - 2 * x[1:-1] + x[2:]) / 4
+    data = bus_rate_data(w_b)
     steps = np.linalg.norm(np.diff(w_b, axis=0), axis=1)
-    step = float(np.median(steps))
     bound = dt * acc_bound
-    return rs.BusRate(lag1=float(signals.lag1_autocorrelation(x)), std=float(x.std()),
-                      step_rms=float(signals.step_rms(x)), alternating_rms=float(signals.rms(alt)),
-                      step_median=step, step_bound=bound, step_ratio=step / bound,
+    return rs.BusRate(**asdict(data), step_bound=bound, step_ratio=data.step_median / bound,
                       at_bound_share=float(np.mean(steps >= (1.0 - AT_BOUND_REL) * bound)))
 
 

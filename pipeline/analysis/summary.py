@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord
 
 
 def _num(x: float | None) -> str:
@@ -45,6 +45,8 @@ def basis_lines(a: CompleteRecord, b: CompleteRecord) -> list[str]:
 def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
     """What ``analyze`` prints of a record written to ``path``: the headline numbers, and for
     a comparison what it compares (:func:`basis_lines`)."""
+    if isinstance(record, ImportedRecord):
+        return imported_lines(record, path)
     if not isinstance(record, CompleteRecord):
         g = record.divergence
         return [f"{record.spec_name}: {record.note}; ω_b grows by "
@@ -65,4 +67,24 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
                      f"{c.amplitude_ratio:.3g}, coverage difference "
                      f"{c.coverage_diff_pp:.2f} pp")
         lines += basis_lines(record, c.other)
+    return lines
+
+
+def imported_lines(record: ImportedRecord, path: Path) -> list[str]:
+    """An imported log's headline numbers, its origin, and which stages ran and why."""
+    o, dom = record.origin, record.dominant
+    lines = [f"{record.spec_name} (imported {o.format} {o.source}, sha256 "
+             f"{o.source_sha256[:12]}): dominant lag-1 {dom.lag1:+.3f} (σ {dom.sigma:.3g}), "
+             f"bus rate lag-1 {record.bus_rate.lag1:+.3f}, median ‖Δv‖ "
+             f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
+             f"{record.provenance.max_abs_s_min_G:.1e}, σ_min(Γ) ≥ "
+             f"{record.conditioning.s_min_G_min:.3g} -> {path}"]
+    if record.damping is not None:
+        d, p = record.damping, record.prediction
+        lines.append(f"  controller {d.controller} (declared): dt·μ_max {d.dt_mu_max:.3g} "
+                     f"({d.fastest_mode.name}), dt*_damping {d.dt_star_damping:.4g} s; "
+                     f"period-2 predicted {p.period2_predicted}, measured "
+                     f"{p.period2_measured}: {'agree' if p.agrees else 'DISAGREE'}")
+    lines += [f"  not run: {s.stage}: {s.why.removeprefix('not run: ')}"
+              for s in record.stages if not s.ran]
     return lines

@@ -24,10 +24,11 @@ from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from pipeline.analysis.imported import analyze_imported
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
 from pipeline.analysis.stages import analyze_log, compare
-from pipeline.artefact_paths import analysis_path, log_path
+from pipeline.artefact_paths import IMPORTED_FOLDER, analysis_path, log_path
 from pipeline.errors import LogError, PipelineError, RunFailed, SpecError
 from pipeline.logs import VerifiedLog, verify_log
 from pipeline.paths import display_path
@@ -204,24 +205,41 @@ class ArtefactStore:
 
     # -- analyses -------------------------------------------------------------------------
 
-    def analysis_path(self, log: VerifiedLog) -> Path:
-        return analysis_path(self.out, log.spec.name)
+    def analysis_root(self, log: VerifiedLog) -> Path:
+        """The folder of the log's analysis folder: ``out``, or ``out/imported`` for an
+        imported log."""
+        return self.out / IMPORTED_FOLDER if log.meta.origin == "imported" else self.out
 
-    def current_analysis(self, log: VerifiedLog, against: VerifiedLog | None = None
-                         ) -> AnalysisRecord | None:
-        """The stored analysis record of ``log`` (compared with ``against`` exactly when one
-        is given) if this analysis code made it from these logs, else None."""
-        return current_analysis(self.analysis_path(log), log, against)
+    def analysis_path(self, log: VerifiedLog) -> Path:
+        return analysis_path(self.analysis_root(log), log.spec.name)
+
+    def current_analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
+                         controller: Spec | None = None) -> AnalysisRecord | None:
+        """The stored analysis record of ``log`` (compared with ``against``, of an imported
+        log with ``controller``, each exactly when one is given) if this analysis code made
+        it from these logs, else None."""
+        return current_analysis(self.analysis_path(log), log, against,
+                                controller.spec_hash if controller is not None else None)
 
     def analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
                  window_start: float | None = None, force: bool = False,
-                 against_record: CompleteRecord | None = None, quiet: bool = False
-                 ) -> StoredAnalysis:
+                 against_record: CompleteRecord | None = None, quiet: bool = False,
+                 controller: Spec | None = None) -> StoredAnalysis:
         """The analysis record of ``log``, compared with ``against`` (a run of the same robot,
         else a SpecError before any work), reused when current, else computed and written
         under the folder's lock. A chosen ``window_start`` is always computed (the stored
         record is of the default window). ``against_record``: ``against``'s own record, when
-        the caller has it, so it is not analysed twice."""
+        the caller has it, so it is not analysed twice. ``controller``: the controller that
+        flew an imported log, declared by the user (its data stages run without one)."""
+        imported = log.meta.origin == "imported"
+        if controller is not None and not imported:
+            raise SpecError(f"--controller: {log.path} is a simulated log, its controller is "
+                            f"its spec's; a controller is declared for an imported log only")
+        if imported and against is not None:
+            raise LogError(f"{log.path}: an imported log is analysed alone (--against compares "
+                           f"simulated runs; compare imported logs by their records)")
+        if against is not None and against.meta.origin == "imported":
+            raise LogError(f"--against {against.path}: an imported log is analysed alone")
         if against is not None:
             check_same_robot(log, against)
             for one in (log, against):
@@ -230,18 +248,19 @@ class ArtefactStore:
                                    f"only its divergence stage runs")
         path = self.analysis_path(log)
         fresh = force or window_start is not None
-        old = None if fresh else self.current_analysis(log, against)
+        old = None if fresh else self.current_analysis(log, against, controller)
         if old is not None:
             return StoredAnalysis(old, path, True)
         with folder_lock(path.parent):
             remove_stale_temps(path.parent)
-            old = None if fresh else self.current_analysis(log, against)
+            old = None if fresh else self.current_analysis(log, against, controller)
             if old is not None:
                 return StoredAnalysis(old, path, True)
             title = f"(against {against.spec.name})" if against is not None else ""
             with nullcontext() if quiet else stage(f"analysis {log.spec.name}", title):
-                record = self._analyse(log, against, window_start, against_record)
-            write_analysis(record, self.out)
+                record = (analyze_imported(log, controller, window_start) if imported else
+                          self._analyse(log, against, window_start, against_record))
+            write_analysis(record, self.analysis_root(log))
         return StoredAnalysis(record, path, False)
 
     @staticmethod

@@ -14,7 +14,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from pipeline.analysis.record import try_read_analysis
-from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
+from pipeline.analysis.schema import AnalysisRecord, DivergedRecord, ImportedRecord
 from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, DIRECTIONS_FILE, log_path
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, VerifiedLog, read_footer
@@ -73,10 +73,11 @@ def _made_from(record: AnalysisRecord, log: VerifiedLog) -> bool:
             and record.log_sha256 == log.sha256)
 
 
-def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None
-                     ) -> AnalysisRecord | None:
+def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None,
+                     controller_hash: str | None = None) -> AnalysisRecord | None:
     """The analysis record at ``path`` if it was made from this log by this analysis code, over
-    the default window, compared with ``against`` exactly when one is given, else None."""
+    the default window, compared with ``against`` exactly when one is given, and for an
+    imported log with the controller of ``controller_hash`` exactly when one is, else None."""
     record = try_read_analysis(path)
     if (record is None or record.analysis_version != analysis_version()
             or not _made_from(record, log)):
@@ -85,6 +86,9 @@ def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None =
     # nor is a comparison whose second run was analysed over another window.
     if not _default_window(record, log):
         return None
+    if isinstance(record, ImportedRecord):
+        declared = record.damping.controller_hash if record.damping is not None else None
+        return record if against is None and declared == controller_hash else None
     comparison = getattr(record, "comparison", None)
     if against is None:
         return record if comparison is None else None
@@ -98,7 +102,7 @@ def _default_window(record: AnalysisRecord, log: VerifiedLog) -> bool:
     """The record's window is the default one of its log (a diverged log's has none)."""
     from pipeline.analysis.stages import choose_window
 
-    if not isinstance(record, CompleteRecord):
+    if isinstance(record, DivergedRecord):
         return True
     default = choose_window(log.rows, log.spec.mission.dt, None)
     return ((record.window.start_step, record.window.stop_step)

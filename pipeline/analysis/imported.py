@@ -1,0 +1,172 @@
+"""The data stages of an imported log (``pipeline.origin = imported``): what t, q and v
+alone say, and the damping theory only where the user declares the controller.
+
+Run on every imported log: Γ rebuilt from q with the provenance check against the σ columns
+the import wrote (stage 1), the per-direction projection, lag-1 and the dominant direction
+(stages 2–3), the per-step velocity jump (stage 6), the bus rate's statistics and the
+conditioning along the log. Run only with ``--controller SPEC`` (the gains, the integrator and
+the step of the loop that flew the log): the damping modes at the representative step, dt·μ_max
+and dt* (eqs. 21–23), the fastest mode and the period-2 prediction (eq. 23). Never run: the
+18×18 map Φ (it needs the task error x̃ the controller held, which no imported log has), the
+alignment (it needs Φ's mode), the mission metrics and the actuators' harm (their columns are
+the simulator's). A prediction is never made from gains the log did not have.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.analysis import schema as rs
+from pipeline.analysis import signals, theory
+from pipeline.analysis.stages import (
+    bus_rate_data,
+    choose_window,
+    rebuild_and_project,
+    representative_step,
+    require_provenance,
+)
+from pipeline.errors import CheckFailed, SpecError
+from pipeline.logs import VerifiedLog
+from pipeline.provenance.keys import analysis_version
+from pipeline.sim.base_controller import block_gains, conditioning_scale
+from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.stability import BUS_YAW_AXIS, mode_fixes
+from pipeline.spec import Spec
+
+IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J"]
+UNDECLARED = "undeclared"
+
+
+def check_controller(log: VerifiedLog, controller: Spec) -> None:
+    """SpecError unless the declared controller's step is the log's, to the resolution the
+    time base was checked to (the step from N stamps each within r: within 2r/(N − 1))."""
+    dt = log.spec.mission.dt
+    time = log.meta.imported.get("time", {})
+    res = float(time.get("resolution") or 0.0)
+    tol = max(2 * res / max(log.rows - 1, 1), 4 * np.finfo(float).eps * dt)
+    if abs(controller.mission.dt - dt) > tol:
+        raise SpecError(f"--controller {controller.name}: field mission.dt: "
+                        f"{controller.mission.dt:g} s is not the log's step {dt:.9g} s: a "
+                        f"prediction from another loop's step would not be this log's")
+
+
+def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
+                     window_start: float | None = None) -> rs.ImportedRecord:
+    """The data stages of an imported log, and with ``controller`` the damping theory."""
+    log.require(IMPORTED_COLUMNS)
+    if controller is not None:
+        check_controller(log, controller)
+    n, dt = log.rows, log.spec.mission.dt
+    win = choose_window(n, dt, window_start)
+    robot = GiordanoRobot(log.spec)
+    prov, y, sigma = rebuild_and_project(robot, log, win)
+    require_provenance(log.path, prov)
+    bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
+    if bad.size:
+        raise CheckFailed(f"{log.path}: the per-direction projection is not finite at step "
+                          f"{win.start + int(bad[0])} (Γ's SVD failed there)")
+    lag1 = signals.lag1_autocorrelation(y)
+    srms = signals.step_rms(y)
+    dom = int(np.argmax(srms))
+    directions = [rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
+                               rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
+                               lag1=float(lag1[i])) for i in range(y.shape[1])]
+    top = directions[dom]
+    cols = log.columns(["v", "s_min_G", "s_min_J", "kappa_G"], win.start, win.stop)
+    jumps = signals.velocity_jumps(cols["v"])
+    damping, prediction = None, None
+    if controller is not None:
+        rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
+        damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
+        prediction = _prediction(damping, controller, top.lag1)
+    imp = log.meta.imported
+    return rs.ImportedRecord(
+        spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,
+        spec_hash=log.meta.spec_hash, sim_version=log.meta.sim_version,
+        analysis_version=analysis_version(),
+        integrator=controller.controller.integrator if controller else UNDECLARED,
+        dt=dt, n_steps=n,
+        origin=rs.Origin(source=imp["source"], source_sha256=imp["source_sha256"],
+                         format=imp["format"], robot_from=imp["robot_from"],
+                         conventions=imp["conventions"],
+                         consistency_median_ratio=imp["consistency"]["median_ratio"]),
+        stages=stages_run(controller),
+        window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
+        provenance=prov, directions=directions,
+        dominant=rs.Dominant(index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
+                             step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))),
+        velocity_jump=rs.VelocityJump(median=float(np.median(jumps)), max=float(np.max(jumps))),
+        bus_rate=bus_rate_data(cols["v"][:, 3:6]),
+        conditioning=conditioning_along(log, robot.floor),
+        damping=damping, prediction=prediction,
+        versions=log.meta.versions or {},
+    )
+
+
+def stages_run(controller: Spec | None) -> list[rs.StageRun]:
+    """Which stages ran on the imported log, and why (the report shows it)."""
+    data = "from t, q and v, which the log has"
+    declared = (f"from the controller declared with --controller ({controller.name}: its "
+                f"gains, integrator and step)" if controller is not None else
+                "not run: no controller declared (--controller SPEC); a prediction is never "
+                "made from gains the log did not have")
+    no_x = "not run: Φ needs the task error x̃ the controller held, which the log does not have"
+    return [
+        rs.StageRun(stage="1 provenance (Γ rebuilt from q)", ran=True, why=data),
+        rs.StageRun(stage="2–3 directions, lag-1, dominant direction", ran=True, why=data),
+        rs.StageRun(stage="6 per-step velocity jump", ran=True, why=data),
+        rs.StageRun(stage="bus rate statistics and conditioning", ran=True, why=data),
+        rs.StageRun(stage="4 damping modes, dt·μ_max, dt* (eqs. 21–23)",
+                    ran=controller is not None, why=declared),
+        rs.StageRun(stage="4 the discrete map Φ (eq. 22)", ran=False, why=no_x),
+        rs.StageRun(stage="5 mode alignment", ran=False, why="not run: it needs Φ's mode"),
+        rs.StageRun(stage="mission metrics and the actuators' harm", ran=False,
+                    why="not run: their columns are the simulator's, not in an imported log"),
+    ]
+
+
+def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: int,
+                   rule: str) -> rs.DampingTheory:
+    """The damping modes at step k from the logged q and the declared gains (eqs. 21–23):
+    D̆ at the γ the declared ramp gives at the rebuilt s_min_G."""
+    row = log.columns(["q", "v"], k, k + 1)
+    T = robot.terms(row["q"][0], row["v"][0])
+    gamma = conditioning_scale(T.s_min_G, controller.controller)
+    _, D = block_gains(controller.controller, gamma)
+    M_b = T.reduced_inertia
+    mu = theory.damping_rates(np.ascontiguousarray(M_b), D)
+    dt, integ = log.spec.mission.dt, controller.controller.integrator
+    fixes = mode_fixes(M_b, D, dt)
+    return rs.DampingTheory(
+        controller=controller.name, controller_hash=controller.spec_hash, rule=rule, step=k,
+        t=k * dt, s_min_G=T.s_min_G, gamma=gamma, mu=mu.tolist(), mu_max=float(mu[-1]),
+        dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
+        regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
+        rho_modes=theory.amplification(dt, mu, integ).tolist(),
+        fastest_mode=rs.FastestMode(
+            name=fixes.mode.name, mu=fixes.mode.mu, dt_mu=fixes.dt_mu, axis=fixes.mode.axis,
+            is_bus_yaw=fixes.mode.axis == BUS_YAW_AXIS, gain_block=fixes.gain_block,
+            share=float(fixes.mode.shares[fixes.mode.block]), gain=fixes.gain,
+            dt_stable=fixes.dt_stable, dt_margin=fixes.dt_margin,
+            gain_stable=fixes.gain_stable, gain_margin=fixes.gain_margin),
+        M_breve=M_b.tolist(), D_breve=D.tolist())
+
+
+def _prediction(damping: rs.DampingTheory, controller: Spec, lag1: float) -> rs.Prediction:
+    """Period-2 predicted by the damping alone (eq. 23): forward Euler, no computation delay,
+    and ρ = 1 − dt·μ_max below −1. Measured: the dominant direction's lag-1 is negative."""
+    predicted = bool(controller.controller.integrator == "explicit"
+                     and not controller.mission.plant.delay_steps and damping.dt_mu_max > 2)
+    measured = bool(lag1 < 0)
+    return rs.Prediction(period2_predicted=predicted, period2_measured=measured,
+                         agrees=bool(np.isfinite(lag1) and predicted == measured))
+
+
+def conditioning_along(log: VerifiedLog, floor: float) -> rs.Conditioning:
+    """σ_min and κ of Γ and σ_min of J⊕ over the whole log (eq. 19), and the steps below the
+    damped inverse's floor (eq. 6)."""
+    c = log.columns(["s_min_G", "kappa_G", "s_min_J"])
+    return rs.Conditioning(
+        s_min_G_min=float(c["s_min_G"].min()), s_min_G_median=float(np.median(c["s_min_G"])),
+        kappa_G_max=float(c["kappa_G"].max()), s_min_J_min=float(c["s_min_J"].min()),
+        floor=floor, steps_below_floor=int(np.sum(c["s_min_J"] < floor)))

@@ -1,0 +1,99 @@
+"""What a foreign log holds and in which conventions: the import's mapping (a small YAML file,
+each field also an option of ``python -m pipeline import``).
+
+    format: npz              # csv | parquet | npz | rosbag | mcap (default: from the suffix)
+    robot: nominal           # a spec (name or file) whose robot block is used, or the block
+    time: t                  # the time stamps' column or key; or `dt:` for a log without one
+    time_unit: s             # s | ms | us | ns
+    q: q                     # one vector column/key (13 wide), or a list of 13 scalar columns
+    v: v                     # likewise, 12 wide
+    quaternion: xyzw         # xyzw | wxyz
+    velocity_frame: bus      # bus | world
+    linear_velocity: origin  # origin | bus_com
+    angle_unit: rad          # rad | deg (joint angles and rates, the bus angular velocity)
+    length_unit: m           # m | mm
+    topics: {odometry: /bus/odom, joints: /arm/joint_states}   # bags: nav_msgs/Odometry and
+                                                              # sensor_msgs/JointState
+
+A key or column path may go into a pickled object (``states.q``: the npz key ``states``, then
+its ``q``); loading a pickle runs code from the file, so it is read only with
+``allow_pickle: true`` (``--allow-pickle``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from pipeline.errors import SpecError
+from pipeline.importer.conventions import Conventions
+from pipeline.spec import RobotSpec
+from pipeline.yamlfile import read_yaml
+
+FORMATS = ("csv", "parquet", "npz", "rosbag", "mcap")
+SUFFIX_FORMAT = {".csv": "csv", ".parquet": "parquet", ".npz": "npz", ".mcap": "mcap",
+                 ".db3": "rosbag"}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+class Topics(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    odometry: str = Field(min_length=1)  # nav_msgs/Odometry: the bus pose and twist
+    joints: str = Field(min_length=1)  # sensor_msgs/JointState: the arm's angles and rates
+
+
+class ImportMapping(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    format: Literal["csv", "parquet", "npz", "rosbag", "mcap"] | None = None
+    robot: str | RobotSpec | None = None
+    time: str | None = "t"
+    time_unit: Literal["s", "ms", "us", "ns"] = "s"
+    dt: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    q: str | list[str] = "q"
+    v: str | list[str] = "v"
+    quaternion: Literal["xyzw", "wxyz"] = "xyzw"
+    velocity_frame: Literal["bus", "world"] = "bus"
+    linear_velocity: Literal["origin", "bus_com"] = "origin"
+    angle_unit: Literal["rad", "deg"] = "rad"
+    length_unit: Literal["m", "mm"] = "m"
+    topics: Topics | None = None
+    allow_pickle: bool = False
+
+    @property
+    def conventions(self) -> Conventions:
+        return Conventions(self.quaternion, self.velocity_frame, self.linear_velocity,
+                           self.angle_unit, self.length_unit)
+
+    def source_format(self, source: Path) -> str:
+        if self.format is not None:
+            return self.format
+        if source.is_dir() and ((source / "metadata.yaml").is_file()
+                                or any(source.glob("*.db3"))):  # a ROS 2 bag is a folder
+            return "rosbag"
+        fmt = SUFFIX_FORMAT.get(source.suffix.lower())
+        if fmt is None:
+            raise SpecError(f"{source}: format: cannot tell from the suffix {source.suffix!r} "
+                            f"(give --format, one of {', '.join(FORMATS)})")
+        return fmt
+
+    def record(self) -> dict[str, Any]:
+        """The mapping as the imported log's metadata records it (JSON)."""
+        return self.model_dump(mode="json", exclude={"allow_pickle"})
+
+
+def load_mapping(path: Path | None, overrides: dict[str, Any]) -> ImportMapping:
+    """The mapping file (if any) with the options given on the command line over it; a
+    one-line SpecError naming the file and the field otherwise."""
+    data = read_yaml(path, "import mapping") if path is not None else {}
+    data = {**data, **{k: v for k, v in overrides.items() if v is not None}}
+    try:
+        return ImportMapping.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        field = ".".join(str(x) for x in err["loc"]) or "<root>"
+        msg = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
+        raise SpecError(f"{path or 'import options'}: field {field}: {msg}") from None

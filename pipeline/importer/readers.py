@@ -1,0 +1,187 @@
+"""Read t, q and v out of a foreign log: CSV, Parquet, NumPy ``.npz`` (ROS 2 bags and MCAP in
+:mod:`pipeline.importer.bags`). Nothing is converted here but the time unit: the columns come
+out as the file holds them, in its own conventions.
+
+The time stamps' resolution is read from the file, for the time base's check
+(:mod:`pipeline.importer.timebase`): half a unit of the last decimal a CSV prints, half a
+tick of an integer stamp, the rounding of a float64 stamp (both ends of a difference).
+"""
+
+from __future__ import annotations
+
+import re
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.errors import SpecError
+from pipeline.importer.mapping import TIME_UNITS, ImportMapping
+
+NQ, NV = 13, 12
+
+
+@dataclass(frozen=True)
+class RawLog:
+    """A foreign log's columns as read, time in seconds."""
+
+    t: np.ndarray | None  # N, seconds; None when the log has no time stamps
+    t_resolution: float | None  # seconds: how finely the stamps are written
+    q: np.ndarray  # N×13 in the log's conventions
+    v: np.ndarray  # N×12
+
+
+def float_resolution(t: np.ndarray) -> float:
+    """The rounding of float64 stamps near their largest value: half an ulp at each end of a
+    difference t_k − t_0, and as much again for the product k·dt it is compared with."""
+    return 2 * float(np.spacing(np.max(np.abs(t)))) if len(t) else 0.0
+
+
+_DECIMAL = re.compile(r"^[+-]?\d*(?:\.(\d*))?(?:[eE]([+-]?\d+))?$")
+
+
+def printed_resolution(text: np.ndarray) -> float:
+    """Half a unit of the last digit printed, of the coarsest row (``0.03`` → 0.005,
+    ``3.0e-02`` → 0.0005, ``30`` → 0.5)."""
+    worst = 0.0
+    for s in text:
+        m = _DECIMAL.match(s)
+        if m is None:
+            continue
+        worst = max(worst, 0.5 * 10.0 ** (int(m[2] or 0) - len(m[1] or "")))
+    return worst
+
+
+def _matrix(source: Path, name: str, value: Any, width: int) -> np.ndarray:
+    try:
+        x = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SpecError(f"{source}: {name}: not numbers") from None
+    if x.ndim != 2 or x.shape[1] != width:
+        raise SpecError(f"{source}: {name}: shape {x.shape}, expected N×{width}")
+    return x
+
+
+def _vector(source: Path, field: str, spec: str | list[str], width: int, get) -> np.ndarray:
+    """One N×width array from a vector column (``spec`` a name) or ``width`` scalar ones."""
+    if isinstance(spec, str):
+        return _matrix(source, f"{field} ({spec})", get(spec), width)
+    if len(spec) != width:
+        raise SpecError(f"{source}: field {field}: {len(spec)} columns named, {width} needed")
+    return _matrix(source, field, np.column_stack([np.asarray(get(c), dtype=float)
+                                                   for c in spec]), width)
+
+
+def read_csv(source: Path, mapping: ImportMapping) -> RawLog:
+    try:
+        df = pd.read_csv(source, dtype=str, skipinitialspace=True)
+    except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise SpecError(f"{source}: not a readable CSV file ({str(exc).splitlines()[0]})"
+                        ) from None
+
+    def get(name: str) -> np.ndarray:
+        if name not in df.columns:
+            raise SpecError(f"{source}: no column {name!r} (columns: "
+                            f"{', '.join(map(str, df.columns[:20]))})")
+        try:
+            return df[name].astype(float).to_numpy()
+        except ValueError:
+            raise SpecError(f"{source}: column {name!r} holds something that is not a "
+                            f"number") from None
+
+    t = res = None
+    if mapping.time is not None:
+        get(mapping.time)  # the column exists and holds numbers
+        scale = TIME_UNITS[mapping.time_unit]
+        text = df[mapping.time].str.strip()
+        t = text.astype(float).to_numpy() * scale
+        res = printed_resolution(text.to_numpy()) * scale + float_resolution(t)
+    return RawLog(t, res, _vector(source, "q", mapping.q, NQ, get),
+                  _vector(source, "v", mapping.v, NV, get))
+
+
+def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
+    if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type) \
+            or pa.types.is_large_list(col.type):
+        return np.array(col.to_pylist(), dtype=float)
+    return col.to_numpy()
+
+
+def read_parquet(source: Path, mapping: ImportMapping) -> RawLog:
+    try:
+        table = pq.read_table(source)
+    except (OSError, pa.ArrowInvalid) as exc:
+        raise SpecError(f"{source}: not a readable Parquet file ({str(exc).splitlines()[0]})"
+                        ) from None
+
+    def get(name: str) -> np.ndarray:
+        if name not in table.column_names:
+            raise SpecError(f"{source}: no column {name!r} (columns: "
+                            f"{', '.join(table.column_names[:20])})")
+        return _numpy_column(table.column(name))
+
+    return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
+                  _vector(source, "v", mapping.v, NV, get))
+
+
+def _stamps(source: Path, mapping: ImportMapping, get) -> tuple[np.ndarray | None,
+                                                                  float | None]:
+    """Time stamps in seconds and their resolution, from a binary column or key."""
+    if mapping.time is None:
+        return None, None
+    raw = np.asarray(get(mapping.time))
+    if raw.ndim != 1:
+        raise SpecError(f"{source}: time ({mapping.time}): shape {raw.shape}, expected N")
+    scale = TIME_UNITS[mapping.time_unit]
+    if np.issubdtype(raw.dtype, np.integer):
+        t = raw.astype(np.int64) * scale  # exact to the tick, then one rounding
+        return t, 0.5 * scale + float_resolution(t)
+    try:
+        t = raw.astype(float) * scale
+    except (TypeError, ValueError):
+        raise SpecError(f"{source}: time ({mapping.time}): not numbers") from None
+    return t, float_resolution(t)
+
+
+def read_npz(source: Path, mapping: ImportMapping) -> RawLog:
+    try:
+        archive = np.load(source, allow_pickle=mapping.allow_pickle)
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        raise SpecError(f"{source}: not a readable .npz file ({str(exc).splitlines()[0]})"
+                        ) from None
+    with archive:
+        cache: dict[str, Any] = {}
+
+        def get(path: str) -> Any:
+            key, *rest = path.split(".")
+            if key not in archive.files:
+                raise SpecError(f"{source}: no key {key!r} (keys: {', '.join(archive.files)})")
+            if key not in cache:
+                try:
+                    cache[key] = archive[key]
+                except ValueError:  # an object array: numpy refuses it without pickles
+                    raise SpecError(f"{source}: key {key!r} holds a pickled object; loading a "
+                                    f"pickle runs code from the file: give --allow-pickle "
+                                    f"if you trust it") from None
+            node = cache[key]
+            for part in rest:
+                node = node.item() if isinstance(node, np.ndarray) and node.dtype == object \
+                    and node.ndim == 0 else node
+                if isinstance(node, dict) and part in node:
+                    node = node[part]
+                elif hasattr(node, part):
+                    node = getattr(node, part)
+                else:
+                    raise SpecError(f"{source}: {path}: no {part!r} in key {key!r}")
+            return node
+
+        return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
+                      _vector(source, "v", mapping.v, NV, get))
+
+
+READERS = {"csv": read_csv, "parquet": read_parquet, "npz": read_npz}

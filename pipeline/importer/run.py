@@ -1,0 +1,188 @@
+"""Import a foreign log: ``<logs>/imported/<name>/run.parquet`` (``python -m pipeline import``).
+
+The steps, each refusing with a one-line SpecError naming the field or the file (exit 2):
+read t, q and v as the mapping says (:mod:`pipeline.importer.readers`); check that q and v
+describe one motion in the declared conventions and in no better one
+(:mod:`pipeline.importer.consistency`, eq. 33); convert to the project's conventions
+(:mod:`pipeline.importer.conventions`); check the time base, or resample on request
+(:mod:`pipeline.importer.timebase`); rebuild the conditioning columns from q with the
+robot's own kernels; write the log atomically.
+
+An imported log holds ``step``, ``t`` (k·dt), ``q``, ``v`` and the rebuilt σ columns
+(``s_min_G``, ``kappa_G``, ``s_min_J``, ``kappa_J``), never a controller's column: what the
+controller did is not in the data. Its metadata spec holds the robot block and the step
+only, and ``pipeline.origin = imported`` with the import record (the source file's hash and
+format, the mapping, the conventions, the time base, the consistency check).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline import artefact_paths
+from pipeline.errors import SpecError
+from pipeline.importer.bags import read_bag
+from pipeline.importer.consistency import ConsistencyCheck, check_conventions
+from pipeline.importer.mapping import ImportMapping
+from pipeline.importer.readers import READERS, RawLog
+from pipeline.importer.timebase import TimeBase, even_time_base, resample
+from pipeline.logs import LogMeta, log_metadata, write_table
+from pipeline.paths import display_path
+from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
+from pipeline.sim.robot import GiordanoRobot
+from pipeline.spec import RobotSpec, Spec, build_spec, load_spec, spec_hash_of
+
+IMPORTED_VERSION = "imported"  # a log's sim_version when no simulator of this project made it
+SIGMA_COLUMNS = ("s_min_G", "kappa_G", "s_min_J", "kappa_J")
+
+
+@dataclass(frozen=True)
+class ImportOutcome:
+    path: Path
+    rows: int
+    time: TimeBase
+    check: ConsistencyCheck
+    robot: str  # where the robot block came from
+
+
+def imported_log_path(logs: Path | str, name: str) -> Path:
+    return artefact_paths.log_path(Path(logs) / artefact_paths.IMPORTED_FOLDER, name)
+
+
+def robot_block(mapping: ImportMapping, here: Path | None) -> tuple[RobotSpec, str, Path | None]:
+    """The robot the log is of: a spec's robot block (and that spec's folder, where its robot
+    file is looked for), or the mapping's own block."""
+    if mapping.robot is None:
+        raise SpecError("import: field robot: which robot the log is of is needed (--robot "
+                        "SPEC: a spec whose robot block is used, or a robot block in the "
+                        "mapping)")
+    if isinstance(mapping.robot, RobotSpec):
+        return mapping.robot, "the mapping's robot block", here
+    spec = load_spec(mapping.robot, here)
+    return spec.robot, f"spec {spec.name}", spec._here
+
+
+def import_spec(name: str, robot: RobotSpec, dt: float, rows: int, here: Path | None,
+                source: str) -> tuple[Spec, dict]:
+    """The imported log's spec: its robot and its step, nothing of a controller."""
+    content = {"robot": robot.model_dump(mode="json"),
+               "mission": {"dt": dt, "duration": rows * dt}}
+    return build_spec(name, content, source, here), content
+
+
+def _stamps(raw_t: np.ndarray | None, mapping: ImportMapping, n: int, source: Path
+            ) -> tuple[np.ndarray, float]:
+    if raw_t is not None:
+        if mapping.dt is not None:
+            raise SpecError(f"{source}: field dt: the log has time stamps ({mapping.time}); "
+                            f"give dt only for a log without them (time: null)")
+        return raw_t, 0.0
+    if mapping.dt is None:
+        raise SpecError(f"{source}: field time: the log has no time stamps: give its step "
+                        f"(--dt)")
+    return np.arange(n) * mapping.dt, 0.0
+
+
+def import_log(source: Path | str, mapping: ImportMapping, name: str,
+               logs: Path | str = "logs", resample_dt: float | None = None,
+               here: Path | None = None) -> ImportOutcome:
+    """Import ``source`` as the log ``<logs>/imported/<name>/run.parquet``; ``here``: the
+    mapping file's folder (a robot file named in it is looked for there)."""
+    source = Path(source)
+    fmt = mapping.source_format(source)
+    robot, robot_from, robot_here = robot_block(mapping, here)
+    # The robot's model, for the reader (a bag's joints by name) and the checks; its step
+    # (here 1 s) is not the model's: the spec is made again with the log's below.
+    model_robot = GiordanoRobot(import_spec(name, robot, 1.0, 1, robot_here, str(source))[0])
+    raw = read_source(source, mapping, fmt, list(model_robot.model.names)[2:])
+    n = len(raw.q)
+    if len(raw.v) != n or (raw.t is not None and len(raw.t) != n):
+        raise SpecError(f"{source}: t, q and v have {len(raw.t) if raw.t is not None else n}, "
+                        f"{n} and {len(raw.v)} rows: not one log")
+    for field, x in (("q", raw.q), ("v", raw.v)):
+        bad = np.flatnonzero(~np.isfinite(x).all(axis=1))
+        if bad.size:
+            raise SpecError(f"{source}: {field}: row {bad[0]} is not finite")
+    t, _ = _stamps(raw.t, mapping, n, source)
+    steps = np.diff(t)
+    if n < 3 or np.any(steps <= 0):
+        even_time_base(t, raw.t_resolution or 0.0, str(source))  # names the problem
+
+    check, converted = check_conventions(model_robot.model, raw.q, raw.v,
+                                         mapping.conventions, steps)
+    problem = check.problem()
+    if problem is not None:
+        raise SpecError(f"{source}: {problem}")
+
+    q, v = converted.q, converted.v
+    if raw.t is None:
+        time = TimeBase(0.0, float(mapping.dt), 0.0, 0.0)
+    else:
+        try:
+            time = even_time_base(t, raw.t_resolution or 0.0, str(source))
+        except SpecError:
+            if resample_dt is None:
+                raise
+            time, q, v = resample(model_robot.model, t, q, v, resample_dt,
+                                      raw.t_resolution or 0.0)
+        else:
+            if resample_dt is not None:
+                time, q, v = resample(model_robot.model, t, q, v, resample_dt,
+                                      raw.t_resolution or 0.0)
+    n = len(q)
+    spec, content = import_spec(name, robot, time.dt, n, robot_here, str(source))
+    sigma = np.array([_sigmas(model_robot, qk) for qk in q])
+    record = {
+        "source": display_path(source.resolve()), "source_sha256": _digest(source),
+        "format": fmt, "mapping": mapping.record(), "robot_from": robot_from,
+        "conventions": mapping.conventions.__dict__, "time": time.record(),
+        "quat_norm_error": converted.quat_norm_error,
+        "consistency": {"median_ratio": check.declared.residuals.median_ratio,
+                        "median_relative": check.declared.residuals.median_relative,
+                        "share_within": check.declared.residuals.share_within,
+                        "alternatives": {check.declared.conventions.differences(
+                            a.conventions)[1]: a.residuals.median_ratio
+                            for a in check.alternatives}},
+    }
+    meta = LogMeta(spec={"name": name, **content}, spec_hash=spec_hash_of(content),
+                   sim_version=IMPORTED_VERSION, robot_file=display_path(spec.robot_path),
+                   robot_hash=file_digest(spec.robot_path), status="complete",
+                   failed_step=None, error="", rows=n,
+                   versions=library_versions(SIM_LIBRARIES), imported=record)
+    columns = {"step": np.arange(n, dtype=np.int64), "t": np.arange(n) * time.dt, "q": q,
+               "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)}}
+    path = imported_log_path(logs, name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_table(path, columns, log_metadata(meta))
+    return ImportOutcome(path, n, time, check, robot_from)
+
+
+def read_source(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) -> RawLog:
+    """The foreign log's t, q and v, read as the mapping says (a bag's reader matches the
+    arm's ``joints`` by name)."""
+    if not source.exists():
+        raise SpecError(f"{source}: file not found")
+    if fmt in ("rosbag", "mcap"):
+        return read_bag(source, mapping, fmt, joints)
+    return READERS[fmt](source, mapping)
+
+
+def _sigmas(robot: GiordanoRobot, q: np.ndarray) -> tuple[float, float, float, float]:
+    """(σ_min, κ) of Γ and of the damped J⊕ at q, by the simulator's kernels (eq. 19)."""
+    T = robot.terms(q, np.zeros(robot.model.nv), dynamics=False)
+    return T.s_min_G, T.kappa_G, T.s_min_J, T.kappa_J
+
+
+def _digest(path: Path) -> str:
+    if path.is_dir():  # a ROS 2 bag: its files, in name order
+        import hashlib
+
+        h = hashlib.sha256()
+        for f in sorted(p for p in path.rglob("*") if p.is_file()):
+            h.update(f.relative_to(path).as_posix().encode())
+            h.update(bytes.fromhex(file_digest(f)))
+        return h.hexdigest()
+    return file_digest(path)

@@ -1,0 +1,83 @@
+"""The time base of a foreign log: a fixed step, checked to the stamps' own resolution, or
+resampled on request (recorded), never silently.
+
+A log is evenly sampled when every stamp lies within its resolution of t_0 + k·dt, with
+dt = (t_{N−1} − t_0)/(N − 1): jitter, a dropped row (a gap of two steps) and a repeated stamp
+all break it, and the first row that does is named. The imported log's ``t`` column is then
+k·dt exactly, and t_0, dt and the largest deviation are recorded.
+
+Resampling (``--resample DT``) puts the log on t_0 + k·DT: q by geodesic interpolation on the
+configuration manifold (``pin.interpolate``) and v linearly between the bracketing rows. It
+changes the data: a period-2 ripple at the source's step is not one at another step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import SpecError
+
+GAP_STEPS = 1.5  # a step this many times dt or longer is rows missing, not jitter
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    t0: float  # s, the first stamp (the imported t column starts at 0)
+    dt: float  # s
+    max_deviation: float  # s, the largest |t_k − t_0 − k·dt|
+    resolution: float  # s, how finely the stamps are written
+    resampled_from: int | None = None  # the source's row count, when resampled
+
+    def record(self) -> dict:
+        return {"t0": self.t0, "dt": self.dt, "max_deviation": self.max_deviation,
+                "resolution": self.resolution, "resampled_from": self.resampled_from}
+
+
+def even_time_base(t: np.ndarray, resolution: float, what: str) -> TimeBase:
+    """The log's fixed step, or a SpecError naming the first row off it."""
+    n = len(t)
+    if n < 3:
+        raise SpecError(f"{what}: {n} rows: an analysis needs at least 3")
+    if not np.all(np.isfinite(t)):
+        raise SpecError(f"{what}: time stamp of row {int(np.argmin(np.isfinite(t)))} is not "
+                        f"finite")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0)) + 1
+        raise SpecError(f"{what}: time stamps not increasing at row {k} ({t[k - 1]!r} then "
+                        f"{t[k]!r})")
+    dt = (t[-1] - t[0]) / (n - 1)
+    dev = np.abs(t - t[0] - np.arange(n) * dt)
+    worst = float(dev.max())
+    if worst > resolution:
+        k = int(np.argmax(dev > resolution))
+        gap = steps / dt
+        big = np.flatnonzero(gap > GAP_STEPS)
+        detail = (f"a gap of {gap[big[0]]:.3g} steps before row {big[0] + 1}" if big.size
+                  else f"row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt")
+        raise SpecError(f"{what}: uneven time base: {detail} (dt {dt:.6g} s, stamps written "
+                        f"to {resolution:.2g} s; steps from {steps.min():.6g} to "
+                        f"{steps.max():.6g} s): give --resample DT to resample (recorded), "
+                        f"nothing is resampled silently")
+    return TimeBase(float(t[0]), float(dt), worst, resolution)
+
+
+def resample(model: pin.Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: float,
+             resolution: float = 0.0) -> tuple[TimeBase, np.ndarray, np.ndarray]:
+    """(q, v) on t_0 + k·dt for every k within the log (to the stamps' ``resolution``): q
+    geodesically, v linearly."""
+    if not dt > 0:
+        raise SpecError(f"--resample {dt}: not a positive step")
+    if np.any(np.diff(t) <= 0):
+        raise SpecError("resample: time stamps not increasing")
+    grid = t[0] + np.arange(int((t[-1] - t[0] + resolution) // dt) + 1) * dt
+    grid = grid[grid <= t[-1] + resolution]
+    j = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
+    lam = np.clip((grid - t[j]) / (t[j + 1] - t[j]), 0.0, 1.0)
+    q_new = np.array([pin.interpolate(model, q[a], q[a + 1], float(w))
+                      for a, w in zip(j, lam, strict=True)])
+    v_new = v[j] + lam[:, None] * (v[j + 1] - v[j])
+    return TimeBase(float(t[0]), float(dt), 0.0, 0.0, len(t)), q_new, v_new

@@ -1,0 +1,371 @@
+"""Logs the pipeline did not write (issue 25): the importer (pipeline/importer/), its
+consistency check (eq. 33) and the data stages of an imported log
+(pipeline/analysis/imported.py).
+
+The project's own short logs are the known answers: cut to t, q and v, written as another
+tool would (CSV, Parquet, the precursor's pickled .npz, a ROS 2 bag, an MCAP file), imported
+and analysed, they must give the original's data-stage numbers; written in another convention
+and declared in the project's, they must be refused with the convention named.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from conftest import run_cli
+from scipy.spatial.transform import Rotation
+
+from pipeline.analysis.schema import ImportedRecord
+from pipeline.analysis.stages import analyze_log
+from pipeline.errors import LogError, SpecError
+from pipeline.importer.conventions import Conventions
+from pipeline.importer.mapping import load_mapping
+from pipeline.importer.run import import_log
+from pipeline.logs import verify_log
+from pipeline.spec import load_spec
+from pipeline.store.door import ArtefactStore
+
+JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
+          "wrist_2_joint", "wrist_3_joint")
+
+
+@pytest.fixture(scope="module")
+def nominal(short_logs):
+    """The short nominal log's t, q, v and its own analysis."""
+    log = verify_log(short_logs["short_nominal"])
+    return log.columns(["t", "q", "v"]), analyze_log(log)
+
+
+def _mapping(**fields) -> object:
+    return load_mapping(None, {"robot": "short_nominal", **fields})
+
+
+def _analyse(path: Path, out: Path, controller: str | None = None) -> ImportedRecord:
+    store = ArtefactStore(path.parents[2], out)
+    ctrl = load_spec(controller) if controller else None
+    return store.analysis(store.open_log(path), quiet=True, controller=ctrl).record
+
+
+def _same_data_stages(imported: ImportedRecord, original) -> None:
+    """Bitwise: the same q and v give the same numbers, whoever wrote them."""
+    assert imported.directions == original.directions
+    assert imported.dominant == original.dominant
+    assert imported.velocity_jump == original.velocity_jump
+    assert imported.provenance == original.provenance
+    assert imported.window == original.window
+    for field in ("lag1", "std", "step_rms", "alternating_rms", "step_median"):
+        assert getattr(imported.bus_rate, field) == getattr(original.bus_rate, field)
+
+
+# -- round trips ------------------------------------------------------------------------------
+
+def test_the_own_log_cut_to_t_q_v_reimported_from_parquet_gives_the_same_numbers(
+        nominal, tmp_path):
+    cols, original = nominal
+    src = tmp_path / "cut.parquet"
+    pq.write_table(pa.table({"t": cols["t"], "q": list(cols["q"]), "v": list(cols["v"])}), src)
+    done = import_log(src, _mapping(), "cut", tmp_path / "logs")
+    assert done.rows == len(cols["t"]) and done.time.max_deviation == 0.0
+    rec = _analyse(done.path, tmp_path / "rep")
+    assert isinstance(rec, ImportedRecord) and rec.origin.format == "parquet"
+    _same_data_stages(rec, original)
+    assert rec.damping is None and rec.prediction is None and rec.integrator == "undeclared"
+
+
+def test_a_csv_of_scalar_columns_reimported_gives_the_same_numbers(nominal, tmp_path):
+    cols, original = nominal
+    q_names = [f"q{i}" for i in range(13)]
+    v_names = [f"v{i}" for i in range(12)]
+    df = pd.DataFrame(np.c_[cols["t"], cols["q"], cols["v"]], columns=["time", *q_names,
+                                                                        *v_names])
+    src = tmp_path / "cut.csv"
+    df.to_csv(src, index=False)  # repr floats: exact
+    done = import_log(src, _mapping(time="time", q=q_names, v=v_names), "cut_csv",
+                      tmp_path / "logs")
+    _same_data_stages(_analyse(done.path, tmp_path / "rep"), original)
+
+
+def test_the_precursors_pickled_npz_with_its_last_row_dropped(nominal, tmp_path):
+    """The precursor's layout (tonitonitonitoni/ffsm_inspection: time, q and v as one pickled
+    object in npz/states_<model>_<n>.npz, quaternion x,y,z,w, bus-frame velocities, no dt,
+    units or robot, the last row dropped), built here from the seed robot's own log."""
+    cols, original = nominal
+    states = {k: cols[k][:-1] for k in ("t", "q", "v")}
+    src = tmp_path / "npz" / "states_ur3_1.npz"
+    src.parent.mkdir()
+    np.savez(src, states=np.array(states, dtype=object))
+    fields = {"time": "states.t", "q": "states.q", "v": "states.v"}
+    with pytest.raises(SpecError, match=r"holds a pickled object.*--allow-pickle"):
+        import_log(src, _mapping(**fields), "precursor", tmp_path / "logs")
+    done = import_log(src, _mapping(allow_pickle=True, **fields), "precursor",
+                      tmp_path / "logs")
+    assert done.rows == len(cols["t"]) - 1
+    meta = verify_log(done.path).meta
+    assert meta.origin == "imported" and meta.imported["format"] == "npz"
+    assert set(verify_log(done.path).columns(["q"]))  # a log the store verifies
+    rec = _analyse(done.path, tmp_path / "rep")
+    # The data alone: a period-2 ripple (lag-1 near −1), the note's dominant direction.
+    assert rec.dominant.lag1 < -0.9 and rec.dominant.sigma == pytest.approx(
+        original.dominant.sigma, rel=1e-2)
+    assert next(s.stage for s in rec.stages if not s.ran).startswith("4 damping")
+    # With the controller declared, the damping theory runs and agrees with the data.
+    rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
+    assert rec.damping.dt_mu_max == pytest.approx(original.theory.dt_mu_max, rel=1e-9)
+    assert rec.damping.fastest_mode.name == original.theory.fastest_mode.name
+    assert rec.prediction.period2_predicted and rec.prediction.agrees
+
+
+# -- the consistency check (eq. 33) -----------------------------------------------------------
+
+def _written(tmp_path: Path, q: np.ndarray, v: np.ndarray, t: np.ndarray) -> Path:
+    src = tmp_path / "x.parquet"
+    pq.write_table(pa.table({"t": t, "q": list(q), "v": list(v)}), src)
+    return src
+
+
+def test_a_wrong_quaternion_order_is_refused_naming_it(nominal, tmp_path):
+    cols, _ = nominal
+    q = cols["q"].copy()
+    q[:, 3:7] = cols["q"][:, [6, 3, 4, 5]]  # written w, x, y, z
+    src = _written(tmp_path, q, cols["v"], cols["t"])
+    with pytest.raises(SpecError) as err:
+        import_log(src, _mapping(), "wxyz", tmp_path / "logs")
+    msg = str(err.value)
+    assert "with --quaternion wxyz they agree" in msg
+    assert "the likely convention error is the quaternion order" in msg
+    ratio = float(msg.split("the median step's residual is ")[1].split("×")[0])
+    assert ratio > 1
+    assert "\n" not in msg
+    # Declared as written, it is taken, and is the same log.
+    done = import_log(src, _mapping(quaternion="wxyz"), "wxyz", tmp_path / "logs")
+    assert np.array_equal(verify_log(done.path).columns(["q"])["q"], cols["q"])
+
+
+def test_world_frame_velocities_are_refused_naming_the_frame(nominal, tmp_path):
+    cols, _ = nominal
+    R = Rotation.from_quat(cols["q"][:, 3:7])
+    v = cols["v"].copy()
+    v[:, 0:3], v[:, 3:6] = R.apply(cols["v"][:, 0:3]), R.apply(cols["v"][:, 3:6])
+    src = _written(tmp_path, cols["q"], v, cols["t"])
+    with pytest.raises(SpecError, match=r"with --velocity-frame world they agree .*the likely "
+                                        r"convention error is the velocity frame$"):
+        import_log(src, _mapping(), "world", tmp_path / "logs")
+    done = import_log(src, _mapping(velocity_frame="world"), "world", tmp_path / "logs")
+    back = verify_log(done.path).columns(["v"])["v"]
+    np.testing.assert_allclose(back, cols["v"], rtol=0, atol=1e-13)
+
+
+def test_conventions_the_data_cannot_tell_apart_leave_the_declared_one(nominal, tmp_path):
+    """A bus held at the world's axes: world and bus frames are the same data; either
+    declaration stands (a tie is not evidence against the declared conventions)."""
+    cols, _ = nominal
+    q = cols["q"].copy()
+    q[:, 3:7] = [0.0, 0.0, 0.0, 1.0]
+    v = cols["v"].copy()
+    v[:, 3:6] = 0.0  # no bus rotation
+    t = cols["t"]
+    for k in range(1, len(q)):  # positions integrated from the velocities (semi-implicit)
+        q[k, :3] = q[k - 1, :3] + v[k, :3] * (t[k] - t[k - 1])
+        q[k, 7:] = q[k - 1, 7:] + v[k, 6:] * (t[k] - t[k - 1])
+    src = _written(tmp_path, q, v, t)
+    for frame in ("bus", "world"):
+        import_log(src, _mapping(velocity_frame=frame), f"f_{frame}", tmp_path / "logs")
+
+
+def test_q_and_v_of_two_motions_are_refused(nominal, tmp_path):
+    cols, _ = nominal
+    v = np.roll(cols["v"], 100, axis=0)  # another part of the mission's velocities
+    src = _written(tmp_path, cols["q"], v, cols["t"])
+    with pytest.raises(SpecError, match="q and v disagree under the declared conventions"):
+        import_log(src, _mapping(), "shifted", tmp_path / "logs")
+
+
+@pytest.mark.parametrize("block,scale,factor", [
+    (slice(6, 12), np.rad2deg(1.0), "the joint rates: 57.3 times"),  # rates in deg/s
+    (slice(0, 3), 1000.0, "the bus's linear velocity: 1000 times"),  # mm/s
+    (slice(0, 12), 2.0, "the bus's linear velocity: 2 times")])
+def test_a_velocity_in_the_wrong_unit_is_refused_with_its_factor(nominal, tmp_path, block,
+                                                                 scale, factor):
+    """A scaled block stays on its chord's line, which a ripple's long chords could hold: the
+    weights of the step name it (eq. 33)."""
+    cols, _ = nominal
+    v = cols["v"].copy()
+    v[:, block] *= scale
+    src = _written(tmp_path, cols["q"], v, cols["t"])
+    with pytest.raises(SpecError, match=f"{factor} what q's motion says"):
+        import_log(src, _mapping(), "scaled", tmp_path / "logs")
+
+
+
+def test_a_log_in_degrees_declared_so_is_the_same_log(nominal, tmp_path):
+    cols, _ = nominal
+    q, v = cols["q"].copy(), cols["v"].copy()
+    q[:, 7:], v[:, 3:] = np.rad2deg(q[:, 7:]), np.rad2deg(v[:, 3:])
+    src = _written(tmp_path, q, v, cols["t"])
+    with pytest.raises(SpecError, match="q and v disagree"):
+        import_log(src, _mapping(), "deg", tmp_path / "logs")
+    done = import_log(src, _mapping(angle_unit="deg"), "deg", tmp_path / "logs")
+    got = verify_log(done.path).columns(["q", "v"])
+    np.testing.assert_allclose(got["q"], cols["q"], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(got["v"], cols["v"], rtol=1e-15, atol=0)
+
+
+# -- the time base ------------------------------------------------------------------------------
+
+def test_an_uneven_time_base_is_refused_or_resampled_on_request(nominal, tmp_path):
+    cols, _ = nominal
+    keep = np.r_[0:200, 201:len(cols["t"])]  # one row dropped: a gap of two steps
+    src = _written(tmp_path, cols["q"][keep], cols["v"][keep], cols["t"][keep])
+    with pytest.raises(SpecError, match=r"uneven time base: a gap of 2 steps before row 200 .*"
+                                        r"--resample DT"):
+        import_log(src, _mapping(), "gappy", tmp_path / "logs")
+    done = import_log(src, _mapping(), "gappy", tmp_path / "logs", resample_dt=0.03)
+    rec = verify_log(done.path).meta.imported
+    assert rec["time"]["resampled_from"] == len(keep) and rec["time"]["dt"] == 0.03
+    assert done.rows == len(cols["t"])
+
+
+def test_stamps_jittered_beyond_their_resolution_are_refused(nominal, tmp_path):
+    cols, _ = nominal
+    t = cols["t"] + np.where(np.arange(len(cols["t"])) == 50, 1e-6, 0.0)
+    src = _written(tmp_path, cols["q"], cols["v"], t)
+    with pytest.raises(SpecError, match=r"uneven time base: row 50 is \+1e-06 s off"):
+        import_log(src, _mapping(), "jitter", tmp_path / "logs")
+
+
+# -- ROS 2 bags and MCAP --------------------------------------------------------------------------
+
+def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
+               drop_joint_row: int | None = None) -> None:
+    """A bag of nav_msgs/Odometry (/bus/odom) and sensor_msgs/JointState (/arm/joint_states,
+    joints in ``joint_order``), stamped at an epoch time in nanoseconds, written with rosbags."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    vec = T["geometry_msgs/msg/Vector3"]
+    with Writer(path, version=9, storage_plugin=plugin) as w:
+        odom = w.add_connection("/bus/odom", "nav_msgs/msg/Odometry", typestore=ts)
+        joints = w.add_connection("/arm/joint_states", "sensor_msgs/msg/JointState",
+                                  typestore=ts)
+        for row, (t, q, v) in enumerate(zip(cols["t"], cols["q"], cols["v"], strict=True)):
+            ns = 1_764_000_000 * 10**9 + round(t * 1e9)
+            header = T["std_msgs/msg/Header"](
+                stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
+                frame_id="world")
+            pose = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](*q[:3]),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=q[3], y=q[4], z=q[5], w=q[6]))
+            twist = T["geometry_msgs/msg/Twist"](linear=vec(*v[:3]), angular=vec(*v[3:6]))
+            msg = T["nav_msgs/msg/Odometry"](
+                header=header, child_frame_id="bus",
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
+                                                               covariance=np.zeros(36)),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist,
+                                                                 covariance=np.zeros(36)))
+            js = T["sensor_msgs/msg/JointState"](
+                header=header, name=[JOINTS[i] for i in joint_order],
+                position=q[7:][joint_order].copy(), velocity=v[6:][joint_order].copy(),
+                effort=np.zeros(0))
+            w.write(odom, ns, ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+            if row != drop_joint_row:
+                w.write(joints, ns, ts.serialize_cdr(js, "sensor_msgs/msg/JointState"))
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_ros2_bag_written_here_is_imported_and_analysed(nominal, tmp_path, storage):
+    cols, original = nominal
+    bag = tmp_path / f"bag_{storage}"
+    _write_bag(bag, cols, storage, [3, 0, 5, 1, 4, 2])  # joints by name, not by position
+    topics = {"odometry": "/bus/odom", "joints": "/arm/joint_states"}
+    src = bag if storage == "sqlite3" else next(bag.glob("*.mcap"))  # a bare MCAP file too
+    done = import_log(src, _mapping(topics=topics), f"bag_{storage}", tmp_path / "logs")
+    rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
+    assert rec.origin.format == ("rosbag" if storage == "sqlite3" else "mcap")
+    _same_data_stages(rec, original)
+    assert rec.prediction.agrees and rec.prediction.period2_measured
+
+
+def test_bag_topics_stamped_apart_are_refused(nominal, tmp_path):
+    cols, _ = nominal
+    bag = tmp_path / "bag"
+    _write_bag(bag, {k: v[:50] for k, v in cols.items()}, "sqlite3", list(range(6)))
+    with pytest.raises(SpecError, match="field topics: no topic '/nope'"):
+        import_log(bag, _mapping(topics={"odometry": "/nope", "joints": "/arm/joint_states"}),
+                   "b", tmp_path / "logs")
+    with pytest.raises(SpecError, match="/arm/joint_states holds sensor_msgs/msg/JointState, "
+                                        "not nav_msgs/msg/Odometry"):
+        import_log(bag, _mapping(topics={"odometry": "/arm/joint_states",
+                                         "joints": "/bus/odom"}), "b", tmp_path / "logs")
+    apart = tmp_path / "apart"
+    _write_bag(apart, {k: v[:50] for k, v in cols.items()}, "sqlite3", list(range(6)),
+               drop_joint_row=20)
+    topics = {"odometry": "/bus/odom", "joints": "/arm/joint_states"}
+    with pytest.raises(SpecError, match=r"not stamped at the same instants \(50 and 49 "
+                                        r"messages; first unmatched stamp \d+ ns\)"):
+        import_log(apart, _mapping(topics=topics), "b", tmp_path / "logs")
+
+
+# -- the analysis of an imported log --------------------------------------------------------------
+
+def test_the_controller_is_declared_for_imported_logs_only_and_at_their_step(
+        nominal, short_logs, tmp_path):
+    cols, _ = nominal
+    src = _written(tmp_path, cols["q"], cols["v"], cols["t"])
+    done = import_log(src, _mapping(), "x", tmp_path / "logs")
+    with pytest.raises(SpecError, match=r"field mission\.dt: 0\.01 s is not the log's step"):
+        _analyse(done.path, tmp_path / "rep", controller="short_omega_ripple_dt010")
+    store = ArtefactStore(tmp_path / "logs", tmp_path / "rep")
+    own = store.open_log(short_logs["short_nominal"])
+    with pytest.raises(SpecError, match="is a simulated log, its controller is its spec's"):
+        store.analysis(own, controller=load_spec("short_nominal"), quiet=True)
+    imported = store.open_log(done.path)
+    with pytest.raises(LogError, match="an imported log is analysed alone"):
+        store.analysis(imported, own, quiet=True)
+    with pytest.raises(LogError, match="data stages are analyze_imported's"):
+        analyze_log(imported)
+    # The record is reused for the same controller only.
+    first = store.analysis(imported, quiet=True, controller=load_spec("short_nominal"))
+    assert not first.reused and first.path.parent.parent.name == "imported"
+    assert store.analysis(imported, quiet=True, controller=load_spec("short_nominal")).reused
+    bare = store.analysis(imported, quiet=True)
+    assert not bare.reused and bare.record.damping is None
+
+
+def test_the_import_and_analyze_commands(nominal, tmp_path):
+    cols, _ = nominal
+    states = {k: cols[k][:-1] for k in ("t", "q", "v")}
+    src = tmp_path / "states_ur3_1.npz"
+    np.savez(src, states=np.array(states, dtype=object))
+    args = ["import", src, "--robot", "short_nominal", "--q", "states.q", "--v", "states.v",
+            "--time", "states.t", "--out", tmp_path / "logs"]
+    r = run_cli(*args)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--allow-pickle" in r.stderr
+    r = run_cli(*args, "--allow-pickle")
+    assert r.returncode == 0, r.stderr
+    assert "q and v agree" in r.stdout
+    log = tmp_path / "logs" / "imported" / "states_ur3_1" / "run.parquet"
+    r = run_cli("analyze", log, "--out", tmp_path / "rep")
+    assert r.returncode == 0, r.stderr
+    assert "imported npz" in r.stdout and "not run: 4 damping modes" in r.stdout
+    rec = json.loads((tmp_path / "rep" / "imported" / "states_ur3_1" /
+                      "analysis.json").read_text())
+    assert rec["origin"]["format"] == "npz" and rec["damping"] is None
+    r = run_cli("import", src, "--allow-pickle", "--q", "states.q", "--v", "states.v",
+                "--time", "states.t", "--out", tmp_path / "logs")
+    assert r.returncode == 2 and "field robot" in r.stderr
+
+
+def test_conventions_list_the_alternatives_a_check_can_tell_apart():
+    c = Conventions()
+    assert len(c.alternatives(0.0)) == 3 and len(c.alternatives(0.01)) == 7
+    assert c.differences(Conventions(quaternion="wxyz", velocity_frame="world")) == (
+        "the quaternion order and the velocity frame", "--quaternion wxyz --velocity-frame world")
