@@ -72,13 +72,14 @@ def _cmd_import(a: argparse.Namespace) -> int:
         return None if text is None else (text.split(",") if "," in text else text)
 
     mapping_file = Path(a.mapping) if a.mapping else None
-    options = {"format": a.format, "robot": a.robot, "time_unit": a.time_unit, "dt": a.dt,
-               "q": columns(a.q), "v": columns(a.v), "quaternion": a.quaternion,
-               "velocity_frame": a.velocity_frame, "linear_velocity": a.linear_velocity,
-               "angle_unit": a.angle_unit, "length_unit": a.length_unit,
-               "allow_pickle": a.allow_pickle or None}
-    if a.time is not None:
-        options["time"] = None if a.time == "none" else a.time
+    given = {"format": a.format, "robot": a.robot, "time_unit": a.time_unit, "dt": a.dt,
+             "q": columns(a.q), "v": columns(a.v), "quaternion": a.quaternion,
+             "velocity_frame": a.velocity_frame, "linear_velocity": a.linear_velocity,
+             "angle_unit": a.angle_unit, "length_unit": a.length_unit,
+             "allow_pickle": a.allow_pickle or None, "time": a.time}
+    options = {k: v for k, v in given.items() if v is not None}
+    if a.time == "none":  # a log without stamps: its step is --dt
+        options["time"] = None
     mapping = load_mapping(mapping_file, options)
     source = Path(a.source)
     name = a.name or (source.stem if source.suffix else source.name)

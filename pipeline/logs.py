@@ -32,6 +32,9 @@ META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "st
 # Columns that may hold +inf: a condition number at an exact singularity (eq. 19). Every other
 # numeric column of a log must be finite.
 MAY_BE_INFINITE = ("kappa_G", "kappa_J")
+# What an imported log's pipeline.import record holds (pipeline/importer/run.py writes it).
+IMPORT_KEYS = ("source", "source_sha256", "format", "mapping", "robot_from", "conventions",
+               "time", "quat_norm_error", "consistency")
 ROW_GROUP = 65_536
 
 
@@ -237,6 +240,10 @@ def _imported(path: Path, md: dict[str, str]) -> dict | None:
         raise LogError(f"{path}: metadata key pipeline.import is not JSON") from None
     if not isinstance(record, dict):
         raise LogError(f"{path}: metadata key pipeline.import is not a mapping")
+    missing = [k for k in IMPORT_KEYS if k not in record]
+    if missing:
+        raise LogError(f"{path}: metadata key pipeline.import: no {missing[0]!r} (the import "
+                       f"record holds {', '.join(IMPORT_KEYS)})")
     return record
 
 

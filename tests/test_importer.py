@@ -11,6 +11,7 @@ and declared in the project's, they must be refused with the convention named.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -189,7 +190,7 @@ def test_q_and_v_of_two_motions_are_refused(nominal, tmp_path):
 @pytest.mark.parametrize("block,scale,factor", [
     (slice(6, 12), np.rad2deg(1.0), "the joint rates: 57.3 times"),  # rates in deg/s
     (slice(0, 3), 1000.0, "the bus's linear velocity: 1000 times"),  # mm/s
-    (slice(0, 12), 2.0, "the bus's linear velocity: 2 times")])
+    (slice(0, 12), 2.0, "every block of v is 2 times")])
 def test_a_velocity_in_the_wrong_unit_is_refused_with_its_factor(nominal, tmp_path, block,
                                                                  scale, factor):
     """A scaled block stays on its chord's line, which a ripple's long chords could hold: the
@@ -239,10 +240,85 @@ def test_stamps_jittered_beyond_their_resolution_are_refused(nominal, tmp_path):
         import_log(src, _mapping(), "jitter", tmp_path / "logs")
 
 
+def test_a_csv_written_by_pandas_with_a_dropped_row_is_refused(nominal, tmp_path):
+    """pandas prints the shortest text of each float (t0 as ``0.0``): the rows are exact, so
+    the resolution is the float's, and a dropped row is a gap whatever the resolution."""
+    cols, _ = nominal
+    keep = np.r_[0:50, 51:len(cols["t"])]
+    q_names, v_names = [f"q{i}" for i in range(13)], [f"v{i}" for i in range(12)]
+    df = pd.DataFrame(np.c_[cols["t"][keep], cols["q"][keep], cols["v"][keep]],
+                      columns=["t", *q_names, *v_names])
+    src = tmp_path / "gap.csv"
+    df.to_csv(src, index=False)
+    with pytest.raises(SpecError, match="uneven time base: a gap of 2 steps before row 50"):
+        import_log(src, _mapping(q=q_names, v=v_names), "gap", tmp_path / "logs")
+
+
+def test_stamps_printed_to_fixed_decimals_or_accumulated_are_even(nominal, tmp_path):
+    cols, _ = nominal
+    n = len(cols["t"])
+    t = np.cumsum(np.full(n, 0.03)) - 0.03  # t += dt: up to 4e-13 s off k·dt
+    import_log(_written(tmp_path, cols["q"], cols["v"], t), _mapping(), "acc", tmp_path / "l")
+    q_names, v_names = [f"q{i}" for i in range(13)], [f"v{i}" for i in range(12)]
+    df = pd.DataFrame(np.c_[cols["q"], cols["v"]], columns=[*q_names, *v_names])
+    df.insert(0, "t", [f"{x:.3f}" for x in cols["t"]])  # written to the millisecond
+    src = tmp_path / "ms.csv"
+    df.to_csv(src, index=False)
+    done = import_log(src, _mapping(q=q_names, v=v_names), "ms", tmp_path / "l")
+    assert done.time.resolution == pytest.approx(5e-4, rel=1e-6)
+
+
+@pytest.mark.parametrize("damage,needle", [
+    ("nan_time", "time (t): row 3 is not a finite time"),
+    ("empty_time", "column 't' holds something that is not a number"),
+])
+def test_a_damaged_csv_time_column_is_one_line(nominal, tmp_path, damage, needle):
+    cols, _ = nominal
+    q_names, v_names = [f"q{i}" for i in range(13)], [f"v{i}" for i in range(12)]
+    df = pd.DataFrame(np.c_[cols["q"][:10], cols["v"][:10]], columns=[*q_names, *v_names])
+    t = [repr(float(x)) for x in cols["t"][:10]]
+    t[3] = "nan" if damage == "nan_time" else ""
+    df.insert(0, "t", t)
+    src = tmp_path / "bad.csv"
+    df.to_csv(src, index=False)
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        import_log(src, _mapping(q=q_names, v=v_names), "bad", tmp_path / "logs")
+
+
+def test_bad_inputs_are_one_line_errors(nominal, tmp_path):
+    cols, _ = nominal
+    rows = [list(r) for r in cols["q"][:5]]
+    rows[2] = rows[2][:12]  # one row a component short
+    src = tmp_path / "ragged.parquet"
+    pq.write_table(pa.table({"t": cols["t"][:5], "q": rows, "v": list(cols["v"][:5])}), src)
+    with pytest.raises(SpecError, match="column 'q': rows of different lengths or nulls"):
+        import_log(src, _mapping(), "ragged", tmp_path / "logs")
+    good = _written(tmp_path, cols["q"], cols["v"], cols["t"])
+    for name in ("../x", "a/b", ".hidden", ""):
+        with pytest.raises(SpecError, match="a log's name is letters"):
+            import_log(good, _mapping(), name, tmp_path / "logs")
+    assert not (tmp_path / "x").exists()
+    with pytest.raises(SpecError, match="no time stamps to resample"):
+        import_log(good, _mapping(time=None, dt=0.03), "x", tmp_path / "logs", resample_dt=0.01)
+
+
+def test_an_imported_log_whose_import_record_is_damaged_is_refused(nominal, tmp_path):
+    cols, _ = nominal
+    done = import_log(_written(tmp_path, cols["q"], cols["v"], cols["t"]), _mapping(), "x",
+                      tmp_path / "logs")
+    table = pq.read_table(done.path)
+    md = dict(table.schema.metadata)
+    md[b"pipeline.import"] = b"{}"
+    pq.write_table(table.replace_schema_metadata(md), done.path)
+    with pytest.raises(LogError, match=r"metadata key pipeline\.import: no 'source'"):
+        verify_log(done.path)
+
+
 # -- ROS 2 bags and MCAP --------------------------------------------------------------------------
 
 def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
-               drop_joint_row: int | None = None) -> None:
+               drop_joint_row: int | None = None, reorder_from: int | None = None,
+               no_velocity: bool = False) -> None:
     """A bag of nav_msgs/Odometry (/bus/odom) and sensor_msgs/JointState (/arm/joint_states,
     joints in ``joint_order``), stamped at an epoch time in nanoseconds, written with rosbags."""
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -271,9 +347,12 @@ def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
                                                                covariance=np.zeros(36)),
                 twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist,
                                                                  covariance=np.zeros(36)))
+            order = joint_order if reorder_from is None or row < reorder_from else \
+                joint_order[::-1]  # a publisher that changes its order mid-log
             js = T["sensor_msgs/msg/JointState"](
-                header=header, name=[JOINTS[i] for i in joint_order],
-                position=q[7:][joint_order].copy(), velocity=v[6:][joint_order].copy(),
+                header=header, name=[JOINTS[i] for i in order],
+                position=q[7:][order].copy(),
+                velocity=np.zeros(0) if no_velocity else v[6:][order].copy(),
                 effort=np.zeros(0))
             w.write(odom, ns, ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
             if row != drop_joint_row:
@@ -284,7 +363,8 @@ def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
 def test_a_ros2_bag_written_here_is_imported_and_analysed(nominal, tmp_path, storage):
     cols, original = nominal
     bag = tmp_path / f"bag_{storage}"
-    _write_bag(bag, cols, storage, [3, 0, 5, 1, 4, 2])  # joints by name, not by position
+    # Joints by name, not by position, and by each message's own order.
+    _write_bag(bag, cols, storage, [3, 0, 5, 1, 4, 2], reorder_from=300)
     topics = {"odometry": "/bus/odom", "joints": "/arm/joint_states"}
     src = bag if storage == "sqlite3" else next(bag.glob("*.mcap"))  # a bare MCAP file too
     done = import_log(src, _mapping(topics=topics), f"bag_{storage}", tmp_path / "logs")
@@ -312,6 +392,11 @@ def test_bag_topics_stamped_apart_are_refused(nominal, tmp_path):
     with pytest.raises(SpecError, match=r"not stamped at the same instants \(50 and 49 "
                                         r"messages; first unmatched stamp \d+ ns\)"):
         import_log(apart, _mapping(topics=topics), "b", tmp_path / "logs")
+    rates = tmp_path / "no_rates"
+    _write_bag(rates, {k: v[:50] for k, v in cols.items()}, "sqlite3", list(range(6)),
+               no_velocity=True)
+    with pytest.raises(SpecError, match="has 6 names, 6 positions and 0 velocities"):
+        import_log(rates, _mapping(topics=topics), "b", tmp_path / "logs")
 
 
 # -- the analysis of an imported log --------------------------------------------------------------
@@ -323,6 +408,8 @@ def test_the_controller_is_declared_for_imported_logs_only_and_at_their_step(
     done = import_log(src, _mapping(), "x", tmp_path / "logs")
     with pytest.raises(SpecError, match=r"field mission\.dt: 0\.01 s is not the log's step"):
         _analyse(done.path, tmp_path / "rep", controller="short_omega_ripple_dt010")
+    with pytest.raises(SpecError, match=r"field robot: the spec's robot .* is not the log's"):
+        _analyse(done.path, tmp_path / "rep", controller="short_servicer_nominal")
     store = ArtefactStore(tmp_path / "logs", tmp_path / "rep")
     own = store.open_log(short_logs["short_nominal"])
     with pytest.raises(SpecError, match="is a simulated log, its controller is its spec's"):
@@ -362,6 +449,12 @@ def test_the_import_and_analyze_commands(nominal, tmp_path):
     r = run_cli("import", src, "--allow-pickle", "--q", "states.q", "--v", "states.v",
                 "--time", "states.t", "--out", tmp_path / "logs")
     assert r.returncode == 2 and "field robot" in r.stderr
+    # A log without stamps: --time none and its step.
+    bare = tmp_path / "bare.parquet"
+    pq.write_table(pa.table({"q": list(cols["q"]), "v": list(cols["v"])}), bare)
+    r = run_cli("import", bare, "--robot", "short_nominal", "--time", "none", "--dt", "0.03",
+                "--out", tmp_path / "logs")
+    assert r.returncode == 0, r.stderr
 
 
 def test_conventions_list_the_alternatives_a_check_can_tell_apart():
@@ -369,3 +462,43 @@ def test_conventions_list_the_alternatives_a_check_can_tell_apart():
     assert len(c.alternatives(0.0)) == 3 and len(c.alternatives(0.01)) == 7
     assert c.differences(Conventions(quaternion="wxyz", velocity_frame="world")) == (
         "the quaternion order and the velocity frame", "--quaternion wxyz --velocity-frame world")
+
+
+# -- claims and reports by name ---------------------------------------------------------------
+
+def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
+    cols, _ = nominal
+    src = _written(tmp_path, cols["q"], cols["v"], cols["t"])
+    logs, out = tmp_path / "logs", tmp_path / "rep"
+    import_log(src, _mapping(), "flight", logs)
+    register = {"logs": str(logs),
+                "runs": {"flight": {"imported": "flight", "controller": "short_nominal"}},
+                "claims": [{"id": "I1", "statement": "The imported log rings at period 2, as "
+                            "its declared controller predicts.", "expect": "hold",
+                            "checks": [{"metric": "flight:dominant.lag1", "op": "lt",
+                                        "threshold": -0.5},
+                                       {"metric": "flight:prediction.agrees", "op": "eq",
+                                        "threshold": True}]}]}
+    path = tmp_path / "claims.yaml"
+    path.write_text(json.dumps(register))  # YAML 1.2 reads JSON
+    r = run_cli("claims", "--claims", path, "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    data = json.loads((out / "claims.json").read_text())
+    assert data["claims"][0]["status"] == "PASS"
+    assert data["claims"][0]["provenance"][0]["origin"].startswith("imported parquet")
+    assert "**imported parquet" in (out / "CLAIMS.md").read_text()
+    r = run_cli("report", "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    index = (out / "index.html").read_text()
+    assert "Imported logs" in index and "imported parquet" in index
+    page = (out / "imported" / "flight" / "imported.md").read_text()
+    assert "**Origin: imported** from" in page and "| 4 the discrete map Φ (eq. 22) | no |" in page
+    # A spec or log path of an imported run is refused when the register is loaded.
+    register["claims"][0]["checks"][0]["metric"] = "flight:spec.mission.dt"
+    path.write_text(json.dumps(register))
+    r = run_cli("claims", "--claims", path, "--out", out)
+    assert r.returncode == 2 and "flight is an imported log" in r.stderr
+    register["runs"]["flight"]["against"] = "flight"
+    path.write_text(json.dumps(register))
+    r = run_cli("claims", "--claims", path, "--out", out)
+    assert r.returncode == 2 and "an imported log is analysed alone" in r.stderr

@@ -21,16 +21,16 @@ from pipeline.analysis import signals, theory
 from pipeline.analysis.stages import (
     bus_rate_data,
     choose_window,
-    rebuild_and_project,
+    direction_stages,
+    fastest_mode_record,
     representative_step,
-    require_provenance,
 )
-from pipeline.errors import CheckFailed, SpecError
+from pipeline.errors import SpecError
 from pipeline.logs import VerifiedLog
-from pipeline.provenance.keys import analysis_version
+from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.stability import BUS_YAW_AXIS, mode_fixes
+from pipeline.sim.stability import mode_fixes
 from pipeline.spec import Spec
 
 IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J"]
@@ -38,8 +38,16 @@ UNDECLARED = "undeclared"
 
 
 def check_controller(log: VerifiedLog, controller: Spec) -> None:
-    """SpecError unless the declared controller's step is the log's, to the resolution the
-    time base was checked to (the step from N stamps each within r: within 2r/(N − 1))."""
+    """SpecError unless the declared controller flew this robot (its spec's robot file, camera
+    frame and bus inertia are the log's) at the log's step, to the resolution the time base
+    was checked to (the step from N stamps each within r: within 2r/(N − 1))."""
+    if (file_digest(controller.robot_path) != log.meta.robot_hash
+            or controller.robot.camera_frame != log.spec.robot.camera_frame
+            or controller.robot.bus_inertia_scale != log.spec.robot.bus_inertia_scale):
+        raise SpecError(f"--controller {controller.name}: field robot: the spec's robot "
+                        f"({controller.robot.file}, camera frame {controller.robot.camera_frame!r}"
+                        f", bus inertia × {controller.robot.bus_inertia_scale:g}) is not the "
+                        f"log's ({log.meta.robot_file}): not the loop that flew it")
     dt = log.spec.mission.dt
     time = log.meta.imported.get("time", {})
     res = float(time.get("resolution") or 0.0)
@@ -59,26 +67,14 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
     n, dt = log.rows, log.spec.mission.dt
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(log.spec)
-    prov, y, sigma = rebuild_and_project(robot, log, win)
-    require_provenance(log.path, prov)
-    bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
-    if bad.size:
-        raise CheckFailed(f"{log.path}: the per-direction projection is not finite at step "
-                          f"{win.start + int(bad[0])} (Γ's SVD failed there)")
-    lag1 = signals.lag1_autocorrelation(y)
-    srms = signals.step_rms(y)
-    dom = int(np.argmax(srms))
-    directions = [rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
-                               rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
-                               lag1=float(lag1[i])) for i in range(y.shape[1])]
-    top = directions[dom]
+    prov, directions, dominant = direction_stages(robot, log, win)
     cols = log.columns(["v", "s_min_G", "s_min_J", "kappa_G"], win.start, win.stop)
     jumps = signals.velocity_jumps(cols["v"])
     damping, prediction = None, None
     if controller is not None:
         rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
         damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
-        prediction = _prediction(damping, controller, top.lag1)
+        prediction = _prediction(damping, controller, dominant.lag1)
     imp = log.meta.imported
     return rs.ImportedRecord(
         spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,
@@ -92,9 +88,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
                          consistency_median_ratio=imp["consistency"]["median_ratio"]),
         stages=stages_run(controller),
         window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
-        provenance=prov, directions=directions,
-        dominant=rs.Dominant(index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
-                             step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))),
+        provenance=prov, directions=directions, dominant=dominant,
         velocity_jump=rs.VelocityJump(median=float(np.median(jumps)), max=float(np.max(jumps))),
         bus_rate=bus_rate_data(cols["v"][:, 3:6]),
         conditioning=conditioning_along(log, robot.floor),
@@ -143,12 +137,7 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
         regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
         rho_modes=theory.amplification(dt, mu, integ).tolist(),
-        fastest_mode=rs.FastestMode(
-            name=fixes.mode.name, mu=fixes.mode.mu, dt_mu=fixes.dt_mu, axis=fixes.mode.axis,
-            is_bus_yaw=fixes.mode.axis == BUS_YAW_AXIS, gain_block=fixes.gain_block,
-            share=float(fixes.mode.shares[fixes.mode.block]), gain=fixes.gain,
-            dt_stable=fixes.dt_stable, dt_margin=fixes.dt_margin,
-            gain_stable=fixes.gain_stable, gain_margin=fixes.gain_margin),
+        fastest_mode=fastest_mode_record(fixes),
         M_breve=M_b.tolist(), D_breve=D.tolist())
 
 

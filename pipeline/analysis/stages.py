@@ -27,7 +27,7 @@ from pipeline.provenance.keys import analysis_version
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.stability import BUS_YAW_AXIS, damping_modes, mode_fixes
+from pipeline.sim.stability import BUS_YAW_AXIS, ModeFixes, damping_modes, mode_fixes
 from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
@@ -113,26 +113,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(spec)
 
-    # Stages 1 and 2: Γ rebuilt at every step, velocity projected in the window.
-    prov, y, sigma = rebuild_and_project(robot, log, win)
-    if check:
-        require_provenance(path, prov)
-
-    bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
-    if bad.size:
-        raise CheckFailed(f"{path}: the per-direction projection is not finite at step "
-                          f"{win.start + int(bad[0])} (Γ's SVD failed there)")
-
-    # Stage 3: per-direction statistics and the dominant direction.
-    lag1 = signals.lag1_autocorrelation(y)
-    srms = signals.step_rms(y)
-    dom = int(np.argmax(srms))
-    directions = [
-        rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
-                     rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
-                     lag1=float(lag1[i]))
-        for i in range(y.shape[1])
-    ]
+    prov, directions, dominant = direction_stages(robot, log, win, check)
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
     cols = log.columns([c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
@@ -146,14 +127,12 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     # Stages 5 and 6: alignment of theory and data directions, per-step velocity jump.
     data_dir = signals.dominant_step_direction(cols["v"])
     jumps = signals.velocity_jumps(cols["v"])
-    top = directions[dom]
     return rs.CompleteRecord(
         **_identity(log),
         window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
         provenance=prov,
         directions=directions,
-        dominant=rs.Dominant(index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
-                             step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))),
+        dominant=dominant,
         theory=at_rep,
         alignment=rs.Alignment(abs_cos=signals.abs_cos(th.direction, data_dir),
                                theory_direction=th.direction.tolist(),
@@ -163,7 +142,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         bus_rate=bus_rate_statistics(cols["v"][:, 3:6], dt, spec.controller.limits.omega_b_acc),
         metrics=mission_metrics(cols),
         harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
-        prediction=prediction(at_rep, top.lag1),
+        prediction=prediction(at_rep, dominant.lag1),
         versions=meta.versions,
         robot=card,
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
@@ -171,6 +150,43 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         mu_max_log=mu_max_along(log, dt, card.mu_bus, robot.floor),
         modes_along=fastest_modes_along(robot, spec, log),
     )
+
+
+def direction_stages(robot: GiordanoRobot, log: VerifiedLog, win: Window, check: bool = True
+                     ) -> tuple[rs.Provenance, list[rs.Direction], rs.Dominant]:
+    """Stages 1–3 from q and v alone: Γ rebuilt at every step with the provenance check, the
+    velocity projected on its singular directions in the window (eq. 26), each direction's
+    lag-1 (eq. 25) and the dominant one (most step-to-step energy)."""
+    prov, y, sigma = rebuild_and_project(robot, log, win)
+    if check:
+        require_provenance(log.path, prov)
+    bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
+    if bad.size:
+        raise CheckFailed(f"{log.path}: the per-direction projection is not finite at step "
+                          f"{win.start + int(bad[0])} (Γ's SVD failed there)")
+    lag1 = signals.lag1_autocorrelation(y)
+    srms = signals.step_rms(y)
+    dom = int(np.argmax(srms))
+    directions = [
+        rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
+                     rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
+                     lag1=float(lag1[i]))
+        for i in range(y.shape[1])
+    ]
+    top = directions[dom]
+    return prov, directions, rs.Dominant(
+        index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
+        step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2)))
+
+
+def fastest_mode_record(fixes: ModeFixes) -> rs.FastestMode:
+    """The fastest damping mode, the gain block that sets it and its fixes (eqs. 21, 24)."""
+    return rs.FastestMode(
+        name=fixes.mode.name, mu=fixes.mode.mu, dt_mu=fixes.dt_mu,
+        axis=fixes.mode.axis, is_bus_yaw=fixes.mode.axis == BUS_YAW_AXIS,
+        gain_block=fixes.gain_block, share=float(fixes.mode.shares[fixes.mode.block]),
+        gain=fixes.gain, dt_stable=fixes.dt_stable, dt_margin=fixes.dt_margin,
+        gain_stable=fixes.gain_stable, gain_margin=fixes.gain_margin)
 
 
 def _identity(log: VerifiedLog) -> dict:
@@ -337,12 +353,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         maps=rs.Maps(explicit=_spectrum(maps["explicit"]), imex=_spectrum(maps["imex"])),
         # The fastest damping mode named, the gain block that sets it and its fixes (eqs. 21,
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
-        fastest_mode=rs.FastestMode(
-            name=fixes.mode.name, mu=fixes.mode.mu, dt_mu=fixes.dt_mu,
-            axis=fixes.mode.axis, is_bus_yaw=fixes.mode.axis == BUS_YAW_AXIS,
-            gain_block=fixes.gain_block, share=float(fixes.mode.shares[fixes.mode.block]),
-            gain=fixes.gain, dt_stable=fixes.dt_stable, dt_margin=fixes.dt_margin,
-            gain_stable=fixes.gain_stable, gain_margin=fixes.gain_margin),
+        fastest_mode=fastest_mode_record(fixes),
         integrator=integ, dt=dt,
         # The plant's computation delay (eq. 29): the map above has none; with one step the
         # fastest mode's characteristic equation is z² − z + dt·μ_max = 0 (eq. 24).

@@ -19,7 +19,7 @@ import numpy as np
 
 from pipeline.analysis.schema import AnalysisRecord, to_json, value_at
 from pipeline.analysis.signals import lag1_autocorrelation
-from pipeline.artefact_paths import log_path
+from pipeline.artefact_paths import IMPORTED_FOLDER, log_path
 from pipeline.claims.record import CheckEval, ClaimEval, read_claims_json, write_claims_json
 from pipeline.claims.register import (
     LOG_GROUPS,
@@ -95,13 +95,24 @@ class Context:
 
     def prepare(self) -> None:
         for name in needed_runs(self.cf):
-            self.runs[name] = self.store.run(self._spec(name), self.cf.runs[name].expect)
+            ref = self.cf.runs[name]
+            if ref.imported is not None:  # a log another tool wrote: opened, never made
+                path = log_path(self.logs / IMPORTED_FOLDER, ref.imported)
+                self.runs[name] = StoredRun(self.store.open_log(path), True)
+                if self.runs[name].meta.origin != "imported":
+                    raise SpecError(f"{self.cf.source}: run {name}: {path} is not an "
+                                    f"imported log")
+            else:
+                self.runs[name] = self.store.run(self._spec(name), ref.expect)
             self.files.append(self.runs[name].path)
         for name in needed_runs(self.cf):
-            dep = self.cf.runs[name].against
+            ref = self.cf.runs[name]
+            dep = ref.against
+            controller = load_spec(ref.controller, self.here) if ref.controller else None
             done = self.store.analysis(
                 self.runs[name].log, self.runs[dep].log if dep else None,
-                against_record=self.analyses.get(dep) if dep else None)
+                against_record=self.analyses.get(dep) if dep else None,
+                controller=controller)
             self.analyses[name] = done.record
             self.files.append(done.path)
 
@@ -192,7 +203,12 @@ class Context:
                     "file": display_path(self.out / "baselines.json")}
             return dig(b, path, "baselines.json"), prov
         run, record = self.runs[source], self.analyses[source]
-        prov = {"source": source, "spec": run.spec.name, "spec_hash": run.meta.spec_hash,
+        imp = run.meta.imported
+        origin = ({} if imp is None else {
+            "origin": f"imported {imp['format']} {imp['source']} (SHA-256 "
+                      f"{imp['source_sha256'][:12]}…)"})
+        prov = {"source": source, **origin, "spec": run.spec.name,
+                "spec_hash": run.meta.spec_hash,
                 "sim_version": run.meta.sim_version,
                 "analysis_version": record.analysis_version,
                 "log": display_path(run.path),

@@ -19,7 +19,11 @@ then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``) or ``note
 ROW.COLUMN of the seed note's published values, the file named by ``note:``, e.g.
 ``note:dt_mu_max.nominal``). A threshold is a literal or ``{metric: SOURCE:PATH}``. The
 operator ``close`` holds when |value − threshold| ≤ rel_tol·|threshold| (``rel_tol`` given
-with it). A run expected to diverge says ``expect: diverged``. A file may ``extends:`` another
+with it). A run expected to diverge says ``expect: diverged``. A run may be a log another tool
+wrote, imported by name (``{imported: NAME}``: ``<logs>/imported/NAME/run.parquet``, with
+``controller: SPEC`` when its controller is declared); its PATHs are its record's
+(``ImportedRecord``): it has no spec but its robot and step, and no controller's columns.
+A file may ``extends:`` another
 (by path relative to itself): its ``runs`` and ``sweeps`` override the parent's by name, its
 ``claims`` are added after the parent's.
 """
@@ -103,9 +107,25 @@ class Claim(_Strict):
 
 
 class RunRef(_Strict):
-    spec: str
+    spec: str | None = None
+    imported: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_.-]+$")
+    controller: str | None = None  # an imported log's declared controller (a spec)
     against: str | None = None
     expect: Literal["complete", "diverged"] = "complete"
+
+    @model_validator(mode="after")
+    def _one_source(self) -> RunRef:
+        if (self.spec is None) == (self.imported is None):
+            raise ValueError("a run is a spec or an imported log's name: give one of spec, "
+                             "imported")
+        if self.imported is not None and (self.against is not None
+                                          or self.expect != "complete"):
+            raise ValueError("an imported log is analysed alone and complete: no against or "
+                             "expect")
+        if self.controller is not None and self.imported is None:
+            raise ValueError("controller declares an imported log's controller; a spec's run "
+                             "has its own")
+        return self
 
 
 class SweepRef(_Strict):
@@ -216,7 +236,14 @@ def validate(cf: ClaimsFile, path: Path) -> None:
                 if source not in cf.runs and source not in FIXED_SOURCES:
                     raise SpecError(f"{where}: unknown metric path {metric!r}: no source "
                                     f"{source!r} (one of {sources})")
-                if source in cf.runs and mpath.startswith("log."):
+                imported = source in cf.runs and cf.runs[source].imported is not None
+                if imported and mpath.split(".")[0] in ("log", "spec"):
+                    raise SpecError(f"{where}: metric {metric!r}: {source} is an imported log: "
+                                    f"it has no spec but its robot and step, and no "
+                                    f"controller's columns; read its analysis record")
+                if imported:
+                    _check_record_path(metric, mpath, "imported", where)
+                elif source in cf.runs and mpath.startswith("log."):
                     _check_log_path(metric, mpath, where)
                 elif source in cf.runs and not mpath.startswith("spec."):
                     _check_record_path(metric, mpath, cf.runs[source].expect, where)
@@ -253,10 +280,15 @@ def _check_log_path(metric: str, mpath: str, where: str) -> None:
 
 def _check_record_path(metric: str, mpath: str, expect: str, where: str) -> None:
     """A path into a run's analysis record names a field of the record of its kind (a
-    diverged run's, else a complete run's: pipeline/analysis/schema.py)."""
-    from pipeline.analysis.schema import CompleteRecord, DivergedRecord, field_type
+    diverged run's, an imported log's, else a complete run's: pipeline/analysis/schema.py)."""
+    from pipeline.analysis.schema import (
+        CompleteRecord,
+        DivergedRecord,
+        ImportedRecord,
+        field_type,
+    )
 
-    kind = DivergedRecord if expect == "diverged" else CompleteRecord
+    kind = {"diverged": DivergedRecord, "imported": ImportedRecord}.get(expect, CompleteRecord)
     try:
         field_type(mpath, kind)
     except KeyError as exc:
@@ -306,6 +338,10 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
         out["note"] = file_digest(note)
     for kind, refs in (("run", cf.runs), ("sweep", cf.sweeps)):
         for name, ref in refs.items():
+            if getattr(ref, "imported", None) is not None:  # the log itself is a file read
+                ctrl = load_spec(ref.controller, here).spec_hash if ref.controller else None
+                out[f"{kind} {name}"] = f"imported {ref.imported}, controller {ctrl}"
+                continue
             spec = load_spec(ref.spec, here)
             out[f"{kind} {name}"] = f"spec {spec.spec_hash}, robot {file_digest(spec.robot_path)}"
     return out

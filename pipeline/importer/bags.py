@@ -72,11 +72,11 @@ def read_bag(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) 
                         f"not stamped at the same instants ({len(odom)} and {len(joint)} "
                         f"messages; first unmatched stamp {only[0]} ns): a log is one instant "
                         f"per row, nothing is interpolated")
-    order = _joint_order(source, joint[stamps[0]], joints) if stamps else list(range(6))
+    arm = [_joint_values(source, mapping.topics.joints, k, joint[k], joints) for k in stamps]
     q = np.array([[*_xyz(odom[k].pose.pose.position), *_quat(odom[k].pose.pose.orientation),
-                   *np.asarray(joint[k].position, dtype=float)[order]] for k in stamps])
+                   *a[0]] for k, a in zip(stamps, arm, strict=True)])
     v = np.array([[*_xyz(odom[k].twist.twist.linear), *_xyz(odom[k].twist.twist.angular),
-                   *np.asarray(joint[k].velocity, dtype=float)[order]] for k in stamps])
+                   *a[1]] for k, a in zip(stamps, arm, strict=True)])
     ns = np.array(stamps, dtype=np.int64)
     # From the first stamp: exact to the tick, then one rounding (an epoch stamp in seconds
     # would keep only ~0.2 µs). Stamps are nanoseconds whatever the mapping's time_unit says.
@@ -94,15 +94,25 @@ def _quat(o) -> list[float]:
     return [float(o.x), float(o.y), float(o.z), float(o.w)]
 
 
-def _joint_order(source: Path, msg, joints: list[str]) -> list[int]:
+def _joint_values(source: Path, topic: str, stamp: int, msg, joints: list[str]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The arm's angles and rates of one JointState message, in the robot's joint order: by
+    the message's own names (a publisher may order them differently message by message), by
+    position only when it names none."""
     names = list(msg.name)
+    pos = np.asarray(msg.position, dtype=float)
+    vel = np.asarray(msg.velocity, dtype=float)
+    width = len(names) if names else len(joints)
+    if len(pos) != width or len(vel) != width:
+        raise SpecError(f"{source}: {topic}: the message stamped {stamp} ns has "
+                        f"{len(names)} names, {len(pos)} positions and {len(vel)} velocities "
+                        f"(the robot's arm has {len(joints)} joints; angles and rates needed)")
     if not names:
-        if len(msg.position) != len(joints):
-            raise SpecError(f"{source}: joints: {len(msg.position)} positions, the robot has "
-                            f"{len(joints)} arm joints")
-        return list(range(len(joints)))
+        return pos, vel
     missing = [j for j in joints if j not in names]
     if missing:
-        raise SpecError(f"{source}: joints: no joint {missing[0]!r} in the message (it names "
-                        f"{', '.join(names)}; the robot's: {', '.join(joints)})")
-    return [names.index(j) for j in joints]
+        raise SpecError(f"{source}: {topic}: the message stamped {stamp} ns has no joint "
+                        f"{missing[0]!r} (it names {', '.join(names)}; the robot's: "
+                        f"{', '.join(joints)})")
+    order = [names.index(j) for j in joints]
+    return pos[order], vel[order]

@@ -66,6 +66,12 @@ class BlockScale:
     weight_sum: float  # α + β: 1 for any integrator, 1/s for a block logged s times too large
     deviation: float  # |α + β − 1| · RMS(d) over the block
     allowance: float  # the fit's residual RMS plus the rounding term
+    rms: float  # RMS(d) over the block
+
+    @property
+    def uncertainty(self) -> float:
+        """How far α + β may be from its value and the fit still explain the data."""
+        return self.allowance / self.rms if self.rms > 0 else float("inf")
 
     @property
     def consistent(self) -> bool:
@@ -92,22 +98,32 @@ class Residuals:
 
     @property
     def median_relative(self) -> float:
-        """The median residual relative to the median speed."""
-        return float(np.median(self.residual) / max(np.median(self.speed), np.finfo(float).tiny))
+        """The median residual relative to the median speed (inf for a log at rest)."""
+        speed = float(np.median(self.speed))
+        return float(np.median(self.residual)) / speed if speed > 0 else float("inf")
 
     @property
     def consistent(self) -> bool:
         return bool(self.median_ratio <= 1.0) and all(b.consistent for b in self.blocks)
 
     def scale_problem(self) -> str | None:
-        """The first block whose weights do not sum to one, with the factor it is off by."""
-        for b in self.blocks:
-            if not b.consistent:
-                factor = 1.0 / b.weight_sum if b.weight_sum else float("inf")
-                return (f"{b.block}: {factor:.4g} times what q's motion says (its weights in "
-                        f"the step sum to {b.weight_sum:.4g}, not 1): a unit or scale error? "
-                        f"(--angle-unit, --length-unit)")
-        return None
+        """The first block whose weights do not sum to one, with the factor it is off by; when
+        every block is off by one factor, the time (its unit, or the step) is the likely
+        error, not a block's unit."""
+        off = [b for b in self.blocks if not b.consistent]
+        if not off:
+            return None
+        b = off[0]
+        factor = 1.0 / b.weight_sum if b.weight_sum else float("inf")
+        same = all(abs(c.weight_sum - d.weight_sum) <= c.uncertainty + d.uncertainty
+                   for c in self.blocks for d in self.blocks)
+        if len(off) == len(self.blocks) and same:
+            return (f"every block of v is {factor:.4g} times what q's motion says (the "
+                    f"weights in the step sum to {b.weight_sum:.4g}, not 1): the time's unit "
+                    f"or the step? (--time-unit, --dt)")
+        return (f"{b.block}: {factor:.4g} times what q's motion says (its weights in "
+                f"the step sum to {b.weight_sum:.4g}, not 1): a unit or scale error? "
+                f"(--angle-unit, --length-unit)")
 
 
 def step_twists(model: pin.Model, q: np.ndarray, dt: float | np.ndarray) -> np.ndarray:
@@ -167,7 +183,8 @@ def block_scale(name: str, d: np.ndarray, a: np.ndarray, b: np.ndarray, rounding
     w = np.linalg.lstsq(A, y, rcond=None)[0]
     rms = float(np.sqrt(np.mean(y**2)))
     resid = float(np.sqrt(np.mean((y - A @ w) ** 2)))
-    return BlockScale(name, float(w.sum()), abs(float(w.sum()) - 1.0) * rms, resid + rounding)
+    return BlockScale(name, float(w.sum()), abs(float(w.sum()) - 1.0) * rms, resid + rounding,
+                      rms)
 
 
 # -- which conventions the data support ------------------------------------------------------

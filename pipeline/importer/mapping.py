@@ -86,10 +86,11 @@ class ImportMapping(BaseModel):
 
 
 def load_mapping(path: Path | None, overrides: dict[str, Any]) -> ImportMapping:
-    """The mapping file (if any) with the options given on the command line over it; a
-    one-line SpecError naming the file and the field otherwise."""
+    """The mapping file (if any) with the options given on the command line over it (each key
+    given, a None included: ``--time none``); a one-line SpecError naming the file and the
+    field otherwise."""
     data = read_yaml(path, "import mapping") if path is not None else {}
-    data = {**data, **{k: v for k, v in overrides.items() if v is not None}}
+    data = {**data, **overrides}
     try:
         return ImportMapping.model_validate(data)
     except ValidationError as exc:

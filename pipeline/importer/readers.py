@@ -31,30 +31,43 @@ class RawLog:
     """A foreign log's columns as read, time in seconds."""
 
     t: np.ndarray | None  # N, seconds; None when the log has no time stamps
-    t_resolution: float | None  # seconds: how finely the stamps are written
+    t_resolution: np.ndarray | None  # N, seconds: how finely each stamp is written
     q: np.ndarray  # N×13 in the log's conventions
     v: np.ndarray  # N×12
 
 
-def float_resolution(t: np.ndarray) -> float:
-    """The rounding of float64 stamps near their largest value: half an ulp at each end of a
-    difference t_k − t_0, and as much again for the product k·dt it is compared with."""
-    return 2 * float(np.spacing(np.max(np.abs(t)))) if len(t) else 0.0
+def float_resolution(t: np.ndarray) -> np.ndarray:
+    """How far float64 stamps t_k may lie from t_0 + k·dt though written from it, per row: the
+    rounding of a stamp accumulated step by step (t += dt: k + 1 roundings of at most an ulp
+    of the largest stamp), and that of the product k·dt it is compared with."""
+    if not len(t):
+        return np.zeros(0)
+    return (np.arange(len(t)) + 2) * float(np.spacing(np.max(np.abs(t))))
 
 
-_DECIMAL = re.compile(r"^[+-]?\d*(?:\.(\d*))?(?:[eE]([+-]?\d+))?$")
+_DECIMAL = re.compile(r"^[+-]?(\d*)(?:\.(\d*))?(?:[eE]([+-]?\d+))?$")
 
 
-def printed_resolution(text: np.ndarray) -> float:
-    """Half a unit of the last digit printed, of the coarsest row (``0.03`` → 0.005,
-    ``3.0e-02`` → 0.0005, ``30`` → 0.5)."""
-    worst = 0.0
-    for s in text:
-        m = _DECIMAL.match(s)
-        if m is None:
-            continue
-        worst = max(worst, 0.5 * 10.0 ** (int(m[2] or 0) - len(m[1] or "")))
-    return worst
+def printed_resolution(text: np.ndarray) -> np.ndarray:
+    """How finely each printed stamp is written, per row, from the writer's habit read off all
+    rows: every row with the same number of decimals is a fixed-decimal writer (``%.3f``: half
+    a unit of the last decimal); a row with 15 significant digits or more is a writer of the
+    shortest text that reads back the same float (Python's repr, pandas' default), whose rows
+    are exact (0: the float's own rounding is :func:`float_resolution`'s); else a writer of S
+    significant digits (``%g``), S the most any row has: half a unit of each row's S-th."""
+    parts = [_DECIMAL.match(s) for s in text]
+    if any(m is None for m in parts):
+        k = next(i for i, m in enumerate(parts) if m is None)
+        raise ValueError(f"row {k}: {text[k]!r} is not a number")
+    decimals = np.array([len(m[2] or "") - int(m[3] or 0) for m in parts])
+    if decimals.min() == decimals.max():
+        return np.full(len(text), 0.5 * 10.0 ** -float(decimals[0]))
+    digits = np.array([len((m[1] + (m[2] or "")).lstrip("0")) for m in parts])
+    if digits.max() >= 15:
+        return np.zeros(len(text))
+    value = np.abs(np.array([float(s) for s in text]))
+    exponent = np.floor(np.log10(np.where(value > 0, value, 1.0)))
+    return np.where(value > 0, 0.5 * 10.0 ** (exponent - digits.max() + 1), 0.0)
 
 
 def _matrix(source: Path, name: str, value: Any, width: int) -> np.ndarray:
@@ -79,7 +92,7 @@ def _vector(source: Path, field: str, spec: str | list[str], width: int, get) ->
 
 def read_csv(source: Path, mapping: ImportMapping) -> RawLog:
     try:
-        df = pd.read_csv(source, dtype=str, skipinitialspace=True)
+        df = pd.read_csv(source, dtype=str, skipinitialspace=True, keep_default_na=False)
     except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise SpecError(f"{source}: not a readable CSV file ({str(exc).splitlines()[0]})"
                         ) from None
@@ -96,11 +109,13 @@ def read_csv(source: Path, mapping: ImportMapping) -> RawLog:
 
     t = res = None
     if mapping.time is not None:
-        get(mapping.time)  # the column exists and holds numbers
         scale = TIME_UNITS[mapping.time_unit]
-        text = df[mapping.time].str.strip()
-        t = text.astype(float).to_numpy() * scale
-        res = printed_resolution(text.to_numpy()) * scale + float_resolution(t)
+        t = _finite_stamps(source, mapping.time, get(mapping.time) * scale)
+        try:
+            res = (printed_resolution(df[mapping.time].str.strip().to_numpy()) * scale
+                   + float_resolution(t))
+        except ValueError as exc:
+            raise SpecError(f"{source}: column {mapping.time!r}: {exc}") from None
     return RawLog(t, res, _vector(source, "q", mapping.q, NQ, get),
                   _vector(source, "v", mapping.v, NV, get))
 
@@ -123,7 +138,11 @@ def read_parquet(source: Path, mapping: ImportMapping) -> RawLog:
         if name not in table.column_names:
             raise SpecError(f"{source}: no column {name!r} (columns: "
                             f"{', '.join(table.column_names[:20])})")
-        return _numpy_column(table.column(name))
+        try:
+            return _numpy_column(table.column(name))
+        except (ValueError, TypeError):  # a list of another length, or a null, in a row
+            raise SpecError(f"{source}: column {name!r}: rows of different lengths or "
+                            f"nulls") from None
 
     return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
                   _vector(source, "v", mapping.v, NV, get))
@@ -142,10 +161,17 @@ def _stamps(source: Path, mapping: ImportMapping, get) -> tuple[np.ndarray | Non
         t = raw.astype(np.int64) * scale  # exact to the tick, then one rounding
         return t, 0.5 * scale + float_resolution(t)
     try:
-        t = raw.astype(float) * scale
+        t = _finite_stamps(source, mapping.time, raw.astype(float) * scale)
     except (TypeError, ValueError):
         raise SpecError(f"{source}: time ({mapping.time}): not numbers") from None
     return t, float_resolution(t)
+
+
+def _finite_stamps(source: Path, name: str, t: np.ndarray) -> np.ndarray:
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise SpecError(f"{source}: time ({name}): row {bad[0]} is not a finite time")
+    return t
 
 
 def read_npz(source: Path, mapping: ImportMapping) -> RawLog:

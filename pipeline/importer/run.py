@@ -17,6 +17,7 @@ format, the mapping, the conventions, the time base, the consistency check).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_version
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.spec import RobotSpec, Spec, build_spec, load_spec, spec_hash_of
 
+NAME = re.compile(r"[A-Za-z0-9_.-]+")
 IMPORTED_VERSION = "imported"  # a log's sim_version when no simulator of this project made it
 SIGMA_COLUMNS = ("s_min_G", "kappa_G", "s_min_J", "kappa_J")
 
@@ -92,6 +94,9 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
     """Import ``source`` as the log ``<logs>/imported/<name>/run.parquet``; ``here``: the
     mapping file's folder (a robot file named in it is looked for there)."""
     source = Path(source)
+    if not NAME.fullmatch(name) or name.startswith("."):
+        raise SpecError(f"--name {name!r}: a log's name is letters, digits, '_', '-' and '.' "
+                        f"(not first), so its folder stays under imported/")
     fmt = mapping.source_format(source)
     robot, robot_from, robot_here = robot_block(mapping, here)
     # The robot's model, for the reader (a bag's joints by name) and the checks; its step
@@ -107,9 +112,10 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
         if bad.size:
             raise SpecError(f"{source}: {field}: row {bad[0]} is not finite")
     t, _ = _stamps(raw.t, mapping, n, source)
+    res = raw.t_resolution if raw.t_resolution is not None else 0.0
     steps = np.diff(t)
     if n < 3 or np.any(steps <= 0):
-        even_time_base(t, raw.t_resolution or 0.0, str(source))  # names the problem
+        even_time_base(t, res, str(source))  # names the problem
 
     check, converted = check_conventions(model_robot.model, raw.q, raw.v,
                                          mapping.conventions, steps)
@@ -119,19 +125,22 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
 
     q, v = converted.q, converted.v
     if raw.t is None:
+        if resample_dt is not None:
+            raise SpecError(f"{source}: --resample: the log has no time stamps to resample "
+                            f"from (its step is --dt {mapping.dt:g})")
         time = TimeBase(0.0, float(mapping.dt), 0.0, 0.0)
     else:
         try:
-            time = even_time_base(t, raw.t_resolution or 0.0, str(source))
+            time = even_time_base(t, res, str(source))
         except SpecError:
             if resample_dt is None:
                 raise
             time, q, v = resample(model_robot.model, t, q, v, resample_dt,
-                                      raw.t_resolution or 0.0)
+                                      res)
         else:
             if resample_dt is not None:
                 time, q, v = resample(model_robot.model, t, q, v, resample_dt,
-                                      raw.t_resolution or 0.0)
+                                      res)
     n = len(q)
     spec, content = import_spec(name, robot, time.dt, n, robot_here, str(source))
     sigma = np.array([_sigmas(model_robot, qk) for qk in q])

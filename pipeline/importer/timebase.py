@@ -28,7 +28,7 @@ class TimeBase:
     t0: float  # s, the first stamp (the imported t column starts at 0)
     dt: float  # s
     max_deviation: float  # s, the largest |t_k − t_0 − k·dt|
-    resolution: float  # s, how finely the stamps are written
+    resolution: float  # s, how finely the stamps are written (the coarsest row's)
     resampled_from: int | None = None  # the source's row count, when resampled
 
     def record(self) -> dict:
@@ -36,8 +36,11 @@ class TimeBase:
                 "resolution": self.resolution, "resampled_from": self.resampled_from}
 
 
-def even_time_base(t: np.ndarray, resolution: float, what: str) -> TimeBase:
-    """The log's fixed step, or a SpecError naming the first row off it."""
+def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> TimeBase:
+    """The log's fixed step, or a SpecError naming the first row off it. ``resolution``: how
+    finely each stamp is written; row k may lie its own, t_0's and t_{N−1}'s resolution off
+    t_0 + k·dt (dt is drawn from those two). A step over GAP_STEPS·dt (rows missing) or under
+    dt/GAP_STEPS (a row too many) is refused whatever the resolution."""
     n = len(t)
     if n < 3:
         raise SpecError(f"{what}: {n} rows: an analysis needs at least 3")
@@ -50,31 +53,34 @@ def even_time_base(t: np.ndarray, resolution: float, what: str) -> TimeBase:
         raise SpecError(f"{what}: time stamps not increasing at row {k} ({t[k - 1]!r} then "
                         f"{t[k]!r})")
     dt = (t[-1] - t[0]) / (n - 1)
+    res = np.broadcast_to(np.asarray(resolution, dtype=float), t.shape)
+    tol = res + res[0] + res[-1]
     dev = np.abs(t - t[0] - np.arange(n) * dt)
     worst = float(dev.max())
-    if worst > resolution:
-        k = int(np.argmax(dev > resolution))
-        gap = steps / dt
-        big = np.flatnonzero(gap > GAP_STEPS)
-        detail = (f"a gap of {gap[big[0]]:.3g} steps before row {big[0] + 1}" if big.size
+    gap = steps / dt
+    odd = np.flatnonzero((gap > GAP_STEPS) | (gap < 1 / GAP_STEPS))
+    if odd.size or np.any(dev > tol):
+        k = int(np.argmax(dev > tol))
+        detail = (f"a gap of {gap[odd[0]]:.3g} steps before row {odd[0] + 1}" if odd.size
                   else f"row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt")
         raise SpecError(f"{what}: uneven time base: {detail} (dt {dt:.6g} s, stamps written "
-                        f"to {resolution:.2g} s; steps from {steps.min():.6g} to "
+                        f"to {float(res.max()):.2g} s; steps from {steps.min():.6g} to "
                         f"{steps.max():.6g} s): give --resample DT to resample (recorded), "
                         f"nothing is resampled silently")
-    return TimeBase(float(t[0]), float(dt), worst, resolution)
+    return TimeBase(float(t[0]), float(dt), worst, float(res.max()))
 
 
 def resample(model: pin.Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: float,
-             resolution: float = 0.0) -> tuple[TimeBase, np.ndarray, np.ndarray]:
+             resolution: float | np.ndarray = 0.0) -> tuple[TimeBase, np.ndarray, np.ndarray]:
     """(q, v) on t_0 + k·dt for every k within the log (to the stamps' ``resolution``): q
     geodesically, v linearly."""
     if not dt > 0:
         raise SpecError(f"--resample {dt}: not a positive step")
     if np.any(np.diff(t) <= 0):
         raise SpecError("resample: time stamps not increasing")
-    grid = t[0] + np.arange(int((t[-1] - t[0] + resolution) // dt) + 1) * dt
-    grid = grid[grid <= t[-1] + resolution]
+    last = float(np.max(resolution))
+    grid = t[0] + np.arange(int((t[-1] - t[0] + last) // dt) + 1) * dt
+    grid = grid[grid <= t[-1] + last]
     j = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
     lam = np.clip((grid - t[j]) / (t[j + 1] - t[j]), 0.0, 1.0)
     q_new = np.array([pin.interpolate(model, q[a], q[a + 1], float(w))

@@ -19,8 +19,8 @@ from functools import partial
 from pathlib import Path
 
 from pipeline.analysis.record import read_analysis
-from pipeline.analysis.schema import DivergedRecord
-from pipeline.artefact_paths import CLAIMS_FILE
+from pipeline.analysis.schema import DivergedRecord, ImportedRecord
+from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, IMPORTED_FOLDER
 from pipeline.atomic_files import atomic_write_text
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
@@ -52,10 +52,38 @@ def load_runs(out: Path) -> list[fg.RunData]:
     return runs
 
 
-def figure_jobs(out: Path, runs: list[fg.RunData]
+def load_imported(out: Path) -> list[fg.RunData]:
+    """Every ``<out>/imported/<name>/analysis.json`` (an imported log's record), read whole or
+    refused like :func:`load_runs`; each named ``<name> (imported)`` wherever it is drawn."""
+    store = ArtefactStore()
+    runs = []
+    for path in sorted((Path(out) / IMPORTED_FOLDER).glob(f"*/{ANALYSIS_FILE}")):
+        rec = read_analysis(path)
+        if not isinstance(rec, ImportedRecord):
+            raise LogError(f"{path}: not an imported log's record (key origin missing)")
+        log = store.recorded_log(rec)
+        runs.append(fg.RunData(f"{rec.spec_name} (imported)", rec, log,
+                               log.meta.spec if log is not None else {},
+                               f"{IMPORTED_FOLDER}/{path.parent.name}"))
+    return runs
+
+
+def render_imported(out: Path, runs: list[fg.RunData]) -> list[Path]:
+    """One page per imported log (``imported/<name>/imported.{md,html}``): its origin, what
+    the data say, the declared controller's theory if any, and which stages ran and why."""
+    written = []
+    for r in runs:
+        ctx = {"rec": r.record, "o": r.record.origin, "code_version": report_version()}
+        written += [render("imported.md.j2", out / r.folder / "imported.md", **ctx),
+                    render("imported.html.j2", out / r.folder / "imported.html", **ctx)]
+    return written
+
+
+def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = ()
                 ) -> tuple[list[tuple[fg.Figure, Callable]], list[str]]:
     """Every figure of the report and the function that draws it (a picklable partial that
-    takes the PNG's path), and what is left out and why."""
+    takes the PNG's path), and what is left out and why. Imported logs are drawn where their
+    data suffice (the lag-1 of each direction), named as imported."""
     jobs: list[tuple[fg.Figure, Callable]] = []
     skipped: list[str] = []
     # A diverged run (its analysis has no per-direction stage) gets its own growth figure,
@@ -64,7 +92,7 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
     runs = [r for r in runs if r not in diverged]
     logged = [r for r in runs if r.log is not None]
     # One palette for the whole report: a run is drawn alike in every figure.
-    styles = fg.palette([r.name for r in [*runs, *diverged]])
+    styles = fg.palette([r.name for r in [*runs, *diverged, *imported]])
     if len(logged) < len(runs):
         skipped.append("time-series figures leave out runs whose analysed log is missing, "
                        "damaged or re-run since (not the bytes the analysis read): "
@@ -77,8 +105,10 @@ def figure_jobs(out: Path, runs: list[fg.RunData]
          partial(fg.rates, logged, styles=styles), logged),
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
-                   "period-2 reads −1, smooth +1."),
-         partial(fg.lag1_directions, runs, styles=styles), runs),
+                   "period-2 reads −1, smooth +1."
+                   + (" Rows marked (imported) are logs another tool wrote, imported with "
+                      "their origin recorded (their pages in imported/)." if imported else "")),
+         partial(fg.lag1_directions, [*runs, *imported], styles=styles), [*runs, *imported]),
         (fg.Figure("figures/gamma_ramp.png", "γ ramp with the logged s_min_G",
                    "scale_by_svd with the spec's controller.base.conditioning knobs and the "
                    "logged (s_min_G, γ) of each step."),
@@ -177,6 +207,7 @@ def _existing(out: Path, *names: str) -> list[str]:
 def _remove_stale(out: Path, keep: set[Path]) -> None:
     """Reports of runs that no longer have an analysis, and figures not drawn this time."""
     stale = [p for p in out.glob("*/mechanism.*") if p not in keep]
+    stale += [p for p in out.glob(f"{IMPORTED_FOLDER}/*/imported.*") if p not in keep]
     stale += [p for p in (out / "figures").glob("*.png") if p not in keep]
     for p in stale:
         p.unlink(missing_ok=True)
@@ -211,17 +242,18 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     runs = load_runs(out)
     claims = read_claims_json(out / CLAIMS_FILE)
     sweep_tables = list(out.glob("sweeps/*/sweep.parquet"))
-    if not runs and claims is None and not sweep_tables:
+    if not runs and not (out / IMPORTED_FOLDER).is_dir() and claims is None and not sweep_tables:
         raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json or "
                        f"sweeps/*/sweep.parquet")
-    jobs, skipped = figure_jobs(out, runs)
+    imported = load_imported(out)
+    jobs, skipped = figure_jobs(out, runs, imported)
     # The figures are drawn on two processes while this one checks the equations against the
     # code and renders the mechanism reports (matplotlib is most of the reports' time; a
     # figure is one task).
     with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
         drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
         cc = cross_check if cross_check is not None else build_cross_check()
-        written = render_cross_check(out, cc)
+        written = render_cross_check(out, cc) + render_imported(out, imported)
         mechanisms = []
         for r in runs:
             if getattr(r.record, "comparison", None) is None:  # single or diverged: no pair
@@ -245,6 +277,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
                       "ci/CLAIMS.md", "ci/claims.json")
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
+                   imported=imported,
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,
                    pages=pages, sweeps=sweeps, code_version=report_version())

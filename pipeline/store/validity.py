@@ -15,7 +15,13 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis.record import try_read_analysis
 from pipeline.analysis.schema import AnalysisRecord, DivergedRecord, ImportedRecord
-from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, DIRECTIONS_FILE, log_path
+from pipeline.artefact_paths import (
+    ANALYSIS_FILE,
+    CLAIMS_FILE,
+    DIRECTIONS_FILE,
+    IMPORTED_FOLDER,
+    log_path,
+)
 from pipeline.errors import LogError
 from pipeline.logs import LogMeta, VerifiedLog, read_footer
 from pipeline.platform import platform_key
@@ -147,7 +153,8 @@ def report_inputs(out: Path) -> list[Path]:
     """The files the reports under ``out`` are rendered from (not the reports themselves)."""
     out = Path(out)
     patterns = (f"*/{ANALYSIS_FILE}", f"*/{DIRECTIONS_FILE}", CLAIMS_FILE, "bench.json",
-                "baselines.json", "sweeps/*/sweep.parquet")
+                "baselines.json", "sweeps/*/sweep.parquet",
+                f"{IMPORTED_FOLDER}/*/{ANALYSIS_FILE}", f"{IMPORTED_FOLDER}/*/{DIRECTIONS_FILE}")
     return sorted(p for pat in patterns for p in out.glob(pat))
 
 
