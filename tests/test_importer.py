@@ -502,3 +502,38 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     path.write_text(json.dumps(register))
     r = run_cli("claims", "--claims", path, "--out", out)
     assert r.returncode == 2 and "an imported log is analysed alone" in r.stderr
+
+
+def test_exact_stamps_keep_their_own_resolution_and_rounded_ones_theirs(nominal, tmp_path):
+    """Integer epoch nanoseconds are exact: 0.3 ms of jitter is refused, not absorbed by an
+    accumulation allowance; a 60 Hz log printed to 10 ms (%.2f) is even, its short and long
+    steps the rounding's."""
+    cols, _ = nominal
+    ns = 1_764_000_000 * 10**9 + np.round(cols["t"] * 1e9).astype(np.int64)
+    ns[500] += 300_000
+    src = tmp_path / "epoch.parquet"
+    pq.write_table(pa.table({"t": ns, "q": list(cols["q"]), "v": list(cols["v"])}), src)
+    with pytest.raises(SpecError, match=r"row 500 is \+0\.0003 s off"):
+        import_log(src, _mapping(time_unit="ns"), "epoch", tmp_path / "logs")
+    t = np.arange(len(cols["t"])) / 60.0
+    q_names, v_names = [f"q{i}" for i in range(13)], [f"v{i}" for i in range(12)]
+    from pipeline.importer.readers import printed_resolution
+    from pipeline.importer.timebase import even_time_base
+
+    text = np.array([f"{x:.2f}" for x in t])
+    tb = even_time_base(np.array([float(s) for s in text]), printed_resolution(text), "60 Hz")
+    assert tb.dt == pytest.approx(1 / 60, rel=1e-4) and q_names and v_names
+
+
+def test_a_run_of_a_register_that_extends_another_replaces_it_whole(tmp_path):
+    from pipeline.claims.register import load_claims
+
+    claim = {"id": "X1", "statement": "s", "expect": "hold",
+             "checks": [{"metric": "flight:dominant.lag1", "op": "lt", "threshold": 0}]}
+    parent = {"runs": {"flight": {"imported": "a", "controller": "short_nominal"}},
+              "claims": [claim]}
+    (tmp_path / "parent.yaml").write_text(json.dumps(parent))
+    (tmp_path / "child.yaml").write_text(json.dumps(
+        {"extends": "parent.yaml", "runs": {"flight": {"imported": "b"}}}))
+    cf = load_claims(tmp_path / "child.yaml")
+    assert cf.runs["flight"].imported == "b" and cf.runs["flight"].controller is None

@@ -37,6 +37,11 @@ IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J"]
 UNDECLARED = "undeclared"
 
 
+def controller_key(controller: Spec) -> str:
+    """What a declared controller is, for reuse: its spec's hash and its robot file's."""
+    return f"{controller.spec_hash}:{file_digest(controller.robot_path)[:16]}"
+
+
 def check_controller(log: VerifiedLog, controller: Spec) -> None:
     """SpecError unless the declared controller flew this robot (its spec's robot file, camera
     frame and bus inertia are the log's) at the log's step, to the resolution the time base
@@ -132,7 +137,8 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
     dt, integ = log.spec.mission.dt, controller.controller.integrator
     fixes = mode_fixes(M_b, D, dt)
     return rs.DampingTheory(
-        controller=controller.name, controller_hash=controller.spec_hash, rule=rule, step=k,
+        controller=controller.name, controller_hash=controller_key(controller), rule=rule,
+        step=k,
         t=k * dt, s_min_G=T.s_min_G, gamma=gamma, mu=mu.tolist(), mu_max=float(mu[-1]),
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
         regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",

@@ -108,7 +108,7 @@ class Claim(_Strict):
 
 class RunRef(_Strict):
     spec: str | None = None
-    imported: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_.-]+$")
+    imported: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
     controller: str | None = None  # an imported log's declared controller (a spec)
     against: str | None = None
     expect: Literal["complete", "diverged"] = "complete"
@@ -172,7 +172,10 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     base = _read(path.parent / str(parent), (*chain, path))
     if "note" in base and "note" not in data:  # the parent's note file, seen from here
         base["note"] = str((path.parent / str(parent)).resolve().parent / base["note"])
-    merged = deep_merge(base, {k: v for k, v in data.items() if k != "claims"})
+    merged = deep_merge(base, {k: v for k, v in data.items()
+                               if k not in ("claims", "runs", "sweeps")})
+    for key in ("runs", "sweeps"):  # an entry overrides the parent's by name, whole
+        merged[key] = {**base.get(key, {}), **data.get(key, {})}
     merged["claims"] = list(base.get("claims", [])) + list(data.get("claims", []))
     return merged
 
@@ -326,6 +329,7 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
     (:func:`pipeline.store.validity.current_claims`)."""
     import hashlib
 
+    from pipeline.analysis.imported import controller_key
     from pipeline.provenance.keys import file_digest
     from pipeline.spec import load_spec
 
@@ -339,7 +343,8 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
     for kind, refs in (("run", cf.runs), ("sweep", cf.sweeps)):
         for name, ref in refs.items():
             if getattr(ref, "imported", None) is not None:  # the log itself is a file read
-                ctrl = load_spec(ref.controller, here).spec_hash if ref.controller else None
+                ctrl = (controller_key(load_spec(ref.controller, here)) if ref.controller
+                        else None)
                 out[f"{kind} {name}"] = f"imported {ref.imported}, controller {ctrl}"
                 continue
             spec = load_spec(ref.spec, here)

@@ -36,13 +36,17 @@ class RawLog:
     v: np.ndarray  # N×12
 
 
-def float_resolution(t: np.ndarray) -> np.ndarray:
-    """How far float64 stamps t_k may lie from t_0 + k·dt though written from it, per row: the
-    rounding of a stamp accumulated step by step (t += dt: k + 1 roundings of at most an ulp
-    of the largest stamp), and that of the product k·dt it is compared with."""
+def float_resolution(t: np.ndarray, accumulated: bool = True) -> np.ndarray:
+    """How far float64 stamps t_k may lie from t_0 + k·dt though written from it, per row: two
+    ulps of the largest stamp (its own rounding and that of t_0 + k·dt), and for stamps that
+    may have been summed step by step (t += dt; not integer ticks) k + 1 roundings of at most
+    an ulp of the time elapsed (t_k − t_0: a sum started at an epoch keeps its offset)."""
     if not len(t):
         return np.zeros(0)
-    return (np.arange(len(t)) + 2) * float(np.spacing(np.max(np.abs(t))))
+    base = 2 * float(np.spacing(np.max(np.abs(t))))
+    if not accumulated:
+        return np.full(len(t), base)
+    return base + (np.arange(len(t)) + 1) * float(np.spacing(np.max(np.abs(t - t[0]))))
 
 
 _DECIMAL = re.compile(r"^[+-]?(\d*)(?:\.(\d*))?(?:[eE]([+-]?\d+))?$")
@@ -159,7 +163,7 @@ def _stamps(source: Path, mapping: ImportMapping, get) -> tuple[np.ndarray | Non
     scale = TIME_UNITS[mapping.time_unit]
     if np.issubdtype(raw.dtype, np.integer):
         t = raw.astype(np.int64) * scale  # exact to the tick, then one rounding
-        return t, 0.5 * scale + float_resolution(t)
+        return t, 0.5 * scale + float_resolution(t, accumulated=False)
     try:
         t = _finite_stamps(source, mapping.time, raw.astype(float) * scale)
     except (TypeError, ValueError):

@@ -58,10 +58,12 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> 
     dev = np.abs(t - t[0] - np.arange(n) * dt)
     worst = float(dev.max())
     gap = steps / dt
-    odd = np.flatnonzero((gap > GAP_STEPS) | (gap < 1 / GAP_STEPS))
+    slack = (res[1:] + res[:-1]) / dt  # a step is known to its two stamps' resolutions
+    odd = np.flatnonzero((gap > GAP_STEPS + slack) | (gap < 1 / GAP_STEPS - slack))
     if odd.size or np.any(dev > tol):
         k = int(np.argmax(dev > tol))
-        detail = (f"a gap of {gap[odd[0]]:.3g} steps before row {odd[0] + 1}" if odd.size
+        what = "a gap of" if odd.size and gap[odd[0]] > 1 else "a row too many: a step of"
+        detail = (f"{what} {gap[odd[0]]:.3g} steps before row {odd[0] + 1}" if odd.size
                   else f"row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt")
         raise SpecError(f"{what}: uneven time base: {detail} (dt {dt:.6g} s, stamps written "
                         f"to {float(res.max()):.2g} s; steps from {steps.min():.6g} to "
@@ -78,7 +80,7 @@ def resample(model: pin.Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: 
         raise SpecError(f"--resample {dt}: not a positive step")
     if np.any(np.diff(t) <= 0):
         raise SpecError("resample: time stamps not increasing")
-    last = float(np.max(resolution))
+    last = float(np.broadcast_to(np.asarray(resolution, dtype=float), t.shape)[-1])
     grid = t[0] + np.arange(int((t[-1] - t[0] + last) // dt) + 1) * dt
     grid = grid[grid <= t[-1] + last]
     j = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)

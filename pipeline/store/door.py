@@ -24,7 +24,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from pipeline.analysis.imported import analyze_imported
+from pipeline.analysis.imported import analyze_imported, controller_key
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
 from pipeline.analysis.stages import analyze_log, compare
@@ -219,7 +219,7 @@ class ArtefactStore:
         log with ``controller``, each exactly when one is given) if this analysis code made
         it from these logs, else None."""
         return current_analysis(self.analysis_path(log), log, against,
-                                controller.spec_hash if controller is not None else None)
+                                controller_key(controller) if controller is not None else None)
 
     def analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
                  window_start: float | None = None, force: bool = False,
