@@ -171,11 +171,36 @@ class Plant(_Block):
     # The bus's torque actuators (N·m): the held bus torque's norm saturated to it; 0: none.
     bus_torque_max: NonNegative = 0.0
 
+    @model_validator(mode="after")
+    def _used_by_the_model(self) -> Plant:
+        # The reduced update has no hold, no delay and no actuator: a field only the sampled
+        # plant reads would be accepted and not simulated, and the analysis would then judge
+        # a loop that never ran.
+        ignored = sorted(f for f in ("substeps", "delay_steps", "bus_torque_max")
+                         if f in self.model_fields_set and self.model == "reduced"
+                         and getattr(self, f) != type(self).model_fields[f].default)
+        if ignored:
+            raise ValueError(f"{ignored[0]} is read only by the sampled plant (model: sampled), "
+                             f"not by model: reduced, which would ignore it")
+        return self
+
 
 class Mission(_Block):
     dt: Positive = 0.03
     duration: Positive = 60.0
     plant: Plant = Plant()
+
+
+class Requirements(_Block):
+    """The stability margins a review asks of every damping mode of the loop as flown
+    (eq. 35). Defaults: 6 dB and 30°, the classical margins rigid-body attitude loops are held
+    to (e.g. NASA GSFC-STD-1000, the Goddard "Golden Rules", rule on control-loop stability
+    margins; cited from the literature, not verified against the text here), and one control
+    step of further computation delay (a flight computer that misses one deadline)."""
+
+    gain_margin_db: Finite = 6.0
+    phase_margin_deg: Annotated[float, Field(ge=0, le=180, allow_inf_nan=False)] = 30.0
+    delay_margin_steps: NonNegative = 1.0
 
 
 class Guidance(_Block):
@@ -222,6 +247,7 @@ class Spec(_Block):
     target: Target = Target()
     camera: Camera = Camera()
     config_sampling: ConfigSampling = ConfigSampling()
+    requirements: Requirements = Requirements()
     # The folder of the spec file (where its own files are looked up first) and the robot file
     # found from it; neither is content: the robot counts by its hash (provenance).
     _here: Path | None = PrivateAttr(default=None)

@@ -27,7 +27,7 @@ from pipeline.spec import load_spec
 
 SHORT = {"t_nominal": "short_nominal", "t_dt010": "short_omega_ripple_dt010",
          "t_imex": "short_omega_ripple_imex"}
-DURATION = 4.0  # s: 133 steps at dt 0.03, a 66-step analysis window
+DURATION = 12.0  # s: 400 steps at dt 0.03, a 200-step analysis window (the least eq. 36 judges)
 
 
 @dataclass(frozen=True)

@@ -119,7 +119,9 @@ def test_the_precursors_pickled_npz_with_its_last_row_dropped(nominal, tmp_path)
     rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
     assert rec.damping.dt_mu_max == pytest.approx(original.theory.dt_mu_max, rel=1e-9)
     assert rec.damping.fastest_mode.name == original.theory.fastest_mode.name
-    assert rec.prediction.period2_predicted and rec.prediction.agrees
+    yaw = rec.prediction.modes[0]
+    assert yaw.mode == "bus yaw ω_b,z" and yaw.predicted_rings and yaw.measured.rings
+    assert rec.prediction.agrees
 
 
 # -- the consistency check (eq. 33) -----------------------------------------------------------
@@ -371,7 +373,7 @@ def test_a_ros2_bag_written_here_is_imported_and_analysed(nominal, tmp_path, sto
     rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
     assert rec.origin.format == ("rosbag" if storage == "sqlite3" else "mcap")
     _same_data_stages(rec, original)
-    assert rec.prediction.agrees and rec.prediction.period2_measured
+    assert rec.prediction.agrees and rec.prediction.modes[0].measured.rings
 
 
 def test_bag_topics_stamped_apart_are_refused(nominal, tmp_path):

@@ -128,21 +128,21 @@ def test_the_bus_torque_limit_bounds_the_norm_and_keeps_the_direction():
 
 @pytest.mark.parametrize("dt_mu", [0.1, 0.5, 1.28, 3.84])
 def test_the_delayed_modes_root_against_its_closed_form_and_a_simulation(dt_mu):
-    """z² − z + dt·μ = 0 (eq. 24): real below ¼, else modulus √(dt·μ) at angle
+    """z² − z + dt·μ = 0 (eqs. 24, 35 with d = 1): real below ¼, else modulus √(dt·μ) at angle
     arccos(1/(2√(dt·μ))); and the recursion e⁺ = e − dt·μ·e⁻ grows by that modulus per step."""
-    from pipeline.analysis.theory import delayed_mode
+    from pipeline.analysis.margins import dominant_root, period_steps
 
-    got = delayed_mode(dt_mu)
+    z = dominant_root(dt_mu, 1)
     if dt_mu < 0.25:
-        assert got.root.imag == 0.0 and got.period_steps == float("inf")
-        assert got.modulus == pytest.approx((1 + np.sqrt(1 - 4 * dt_mu)) / 2)
+        assert z.imag == 0.0 and period_steps(z) is None
+        assert abs(z) == pytest.approx((1 + np.sqrt(1 - 4 * dt_mu)) / 2)
     else:
-        assert got.modulus == pytest.approx(np.sqrt(dt_mu), rel=1e-12)
+        assert abs(z) == pytest.approx(np.sqrt(dt_mu), rel=1e-12)
         angle = np.arccos(1 / (2 * np.sqrt(dt_mu)))
-        assert got.period_steps == pytest.approx(2 * np.pi / angle, rel=1e-12)
+        assert period_steps(z) == pytest.approx(2 * np.pi / angle, rel=1e-12)
     e = [1.0, 1.0]
     for _ in range(400):
         e.append(e[-1] - dt_mu * e[-2])
     env = max(abs(x) for x in e[-20:]) / max(abs(x) for x in e[-120:-100])
-    assert env ** (1 / 100) == pytest.approx(got.modulus, rel=2e-2)
-    assert got.stable == (dt_mu < 1)
+    assert env ** (1 / 100) == pytest.approx(abs(z), rel=2e-2)
+    assert (abs(z) < 1) == (dt_mu < 1)

@@ -43,7 +43,7 @@ def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
     path = write_analysis(typed, tmp_path)
     text = path.read_text()
     back = read_analysis(path)
-    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/4"
+    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/5"
     assert check_record(json.loads(text)) is None
     # The same record, field by field, with the two fields the writer sets.
     assert back == dataclasses.replace(typed, schema=back.schema,
@@ -63,8 +63,9 @@ def test_the_serialisation_keeps_field_order_and_leaves_out_only_absent_fields(t
     bare = to_json(dataclasses.replace(typed.theory, window_steps_below_floor=None,
                                        at_or_above_floor=None))
     assert "window_steps_below_floor" not in bare and "at_or_above_floor" not in bare
-    # A required field that is null stays, as null (no delay: no delayed root).
-    assert data["theory"]["delayed"] is None and "delayed" in data["theory"]
+    # A required field that is null stays, as null (a quiet mode is held by no limit).
+    quiet = data["prediction"]["modes"][-1]
+    assert quiet["held_by"] is None and "held_by" in quiet
     written = {**data, "schema": "s", "directions_sha256": "0" * 64}
     assert record_from_json(written) == dataclasses.replace(typed, schema="s",
                                                             directions_sha256="0" * 64)
@@ -154,7 +155,7 @@ def test_paths_name_fields_by_the_schema_and_read_by_value_at(typed):
     # An optional field that is absent names nothing; a required null field reads None.
     with pytest.raises(KeyError, match="comparison"):
         value_at(typed, "comparison.lag1_flip")
-    assert value_at(typed, "theory.delayed") is None
+    assert value_at(typed, "prediction.modes.-1.held_by") is None
 
 
 def test_every_path_the_code_reads_names_a_field():

@@ -170,8 +170,11 @@ def test_mechanism_report_numbers_come_from_analysis_json():
     b = built()
     rec = json.loads((b.reports / "t_nominal" / "analysis.json").read_text())
     md = (b.reports / "t_nominal" / "mechanism.md").read_text()
-    assert "Period-2 instability" in md
+    assert "Unstable as flown" in md and "The modes of the loop as flown" in md
     th = rec["theory"]
+    assert f"{th['spectral_radius']:.4g}" in md
+    for m in th["modes"]:  # the table of modes, one row each, with its margins
+        assert m["name"] in md and f"{m['margins']['gain_margin_db']:.3g}" in md
     for value in (rec["dominant"]["lag1"], th["dt_mu_max"], th["dt_star_damping"],
                   th["dt_star_map"], rec["alignment"]["abs_cos"],
                   rec["comparison"]["amplitude_ratio"]):
@@ -179,7 +182,7 @@ def test_mechanism_report_numbers_come_from_analysis_json():
     for row in rec["comparison"]["table"]:
         assert row["quantity"].replace("|", "\\|") in md
     imex = (b.reports / "t_imex" / "mechanism.md").read_text()
-    assert "imex" in imex and "removes the ripple" in imex
+    assert "imex" in imex and "keeps every mode stable" in imex
 
 
 def test_cross_check_markdown_has_a_row_per_equation_with_file_and_line():

@@ -6,7 +6,9 @@ the import wrote (stage 1), the per-direction projection, lag-1 and the dominant
 (stages 2–3), the per-step velocity jump (stage 6), the bus rate's statistics and the
 conditioning along the log. Run only with ``--controller SPEC`` (the gains, the integrator and
 the step of the loop that flew the log): the damping modes at the representative step, dt·μ_max
-and dt* (eqs. 21–23), the fastest mode and the period-2 prediction (eq. 23). Never run: the
+and dt* (eqs. 21–23), the fastest mode, every mode's loop as the declared controller flew it
+with its margins (eq. 35), and each mode's prediction against its own coordinate in the data
+(eq. 36). Never run: the
 18×18 map Φ (it needs the task error x̃ the controller held, which no imported log has), the
 alignment (it needs Φ's mode), the mission metrics and the actuators' harm (their columns are
 the simulator's). A prediction is never made from gains the log did not have.
@@ -25,6 +27,7 @@ from pipeline.analysis.stages import (
     fastest_mode_record,
     representative_step,
 )
+from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import SpecError
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version, file_digest
@@ -72,14 +75,15 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
     n, dt = log.rows, log.spec.mission.dt
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(log.spec)
-    prov, directions, dominant = direction_stages(robot, log, win)
+    prov, directions, dominant, nu_breve = direction_stages(robot, log, win)
     cols = log.columns(["v", "s_min_G", "s_min_J", "kappa_G"], win.start, win.stop)
     jumps = signals.velocity_jumps(cols["v"])
     damping, prediction = None, None
     if controller is not None:
         rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
         damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
-        prediction = _prediction(damping, controller, dominant.lag1)
+        prediction = judge(damping.modes, np.asarray(damping.M_breve), nu_breve, dt,
+                           damping.delay_steps, controller.controller.limits)
     imp = log.meta.imported
     return rs.ImportedRecord(
         spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,
@@ -135,26 +139,17 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
     M_b = T.reduced_inertia
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)
     dt, integ = log.spec.mission.dt, controller.controller.integrator
-    fixes = mode_fixes(M_b, D, dt)
+    delay = controller.mission.plant.delay_steps
+    req = rs.Requirement(**controller.requirements.model_dump())
     return rs.DampingTheory(
         controller=controller.name, controller_hash=controller_key(controller), rule=rule,
         step=k,
         t=k * dt, s_min_G=T.s_min_G, gamma=gamma, mu=mu.tolist(), mu_max=float(mu[-1]),
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
-        regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
-        rho_modes=theory.amplification(dt, mu, integ).tolist(),
-        fastest_mode=fastest_mode_record(fixes),
+        fastest_mode=fastest_mode_record(mode_fixes(M_b, D, dt)),
+        plant=controller.mission.plant.model, delay_steps=delay, requirement=req,
+        modes=mode_loops(M_b, D, dt, integ, delay, req),
         M_breve=M_b.tolist(), D_breve=D.tolist())
-
-
-def _prediction(damping: rs.DampingTheory, controller: Spec, lag1: float) -> rs.Prediction:
-    """Period-2 predicted by the damping alone (eq. 23): forward Euler, no computation delay,
-    and ρ = 1 − dt·μ_max below −1. Measured: the dominant direction's lag-1 is negative."""
-    predicted = bool(controller.controller.integrator == "explicit"
-                     and not controller.mission.plant.delay_steps and damping.dt_mu_max > 2)
-    measured = bool(lag1 < 0)
-    return rs.Prediction(period2_predicted=predicted, period2_measured=measured,
-                         agrees=bool(np.isfinite(lag1) and predicted == measured))
 
 
 def conditioning_along(log: VerifiedLog, floor: float) -> rs.Conditioning:

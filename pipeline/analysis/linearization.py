@@ -1,10 +1,11 @@
-"""Finite-difference linearisation of the simulator's own step, to check the map Φ (eq. 22).
+"""Finite-difference linearisation of the simulator's own step, to check the map Φ of the loop
+as flown (eqs. 22, 34): the simulator's update, or the sampled-data plant with its delay.
 
 The simulator is put at a rest steady state: a static reference equal to the start pose and
 the posture spring's q̄ at the start posture, so x̃ = 0 and e = v̆ − v̆_des = 0 there.
 Each coordinate of z = [x̃; e] is perturbed by ±h (x̃ through a configuration change that
 keeps the CoM fixed, δθ = Γ⁻¹ [0; J_x⁻¹ δx̃]) and one ``Mission.step`` is taken; the central
-differences give ∂z⁺/∂z, to compare with ``theory.discrete_map`` at the same state.
+differences give ∂z⁺/∂z, to compare with ``theory.flown_map`` at the same state.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.analysis.theory import discrete_map, posture_stiffness
+from pipeline.analysis.theory import flown_map, posture_stiffness
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import Reference
 from pipeline.sim.mission import LoopState, Mission, task_errors
@@ -38,7 +39,7 @@ class StaticGuidance:
 @dataclass(frozen=True)
 class Linearization:
     Phi_fd: np.ndarray  # ∂z⁺/∂z from the simulator's step
-    Phi_theory: np.ndarray  # discrete_map at the same state
+    Phi_theory: np.ndarray  # flown_map at the same state
     max_abs_diff: float
 
 
@@ -64,34 +65,57 @@ def _state(mission: Mission, q: np.ndarray, v_breve: np.ndarray) -> LoopState:
     return LoopState(q=q, v=v, v_c=np.zeros(3), v_breve=v_breve.copy())
 
 
+def _increment_force(mission: Mission, q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The generalized force that moves the reduced velocity by p over one step at rest at q
+    (eq. 29 at first order: τ = M Γ⁻¹ [0; p/dt]); the held command a delayed plant carries."""
+    T = mission.robot.terms(q, np.zeros(mission.robot.model.nv))
+    return T.M @ (T.gamma_inv @ np.concatenate([np.zeros(3), p / mission.dt]))
+
+
+def _force_increment(mission: Mission, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """The reduced velocity increment over one step of a held force τ at rest at q: the
+    inverse of :func:`_increment_force`."""
+    T = mission.robot.terms(q, np.zeros(mission.robot.model.nv))
+    return mission.dt * (T.gamma @ np.linalg.solve(T.M, tau))[3:]
+
+
 def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
-    """∂z⁺/∂z of ``Mission.step`` about the rest state at the start pose, and Φ there."""
+    """∂w⁺/∂w of ``Mission.step`` about the rest state at the start pose, and the flown map Φ
+    there (eq. 34): the spec's integrator, plant and delay. w = [x̃; e] (18), and with one step
+    of delay the velocity increment the held command carries (27)."""
     mission = Mission(spec)
     q0 = mission.q0.copy()
     mission.guidance = StaticGuidance(_rest_reference(mission, q0))
     mission.robot.q_bar = q0[7:].copy()  # the posture spring is at rest too
     model = mission.robot.model
+    plant = spec.mission.plant
+    delay = plant.delay_steps if plant.model == "sampled" else 0
     T0 = mission.robot.terms(q0, np.zeros(model.nv))
     gamma = conditioning_scale(T0.s_min_G, spec.controller)
     err0 = task_errors(T0, mission.guidance.reference(0.0), gamma, np.zeros(3))
     J_x = err0.J_x
 
-    Z, Zp = np.zeros((18, 18)), np.zeros((18, 18))
-    for j in range(18):
+    size = 18 + 9 * delay
+    W, Wp = np.zeros((size, size)), np.zeros((size, size))
+    for j in range(size):
         cols = []
         for sgn in (1.0, -1.0):
-            dz = np.zeros(18)
-            dz[j] = sgn * h
-            dtheta = T0.gamma_inv @ np.concatenate([np.zeros(3), np.linalg.solve(J_x, dz[:9])])
-            s = _state(mission, pin.integrate(model, q0, dtheta), dz[9:])
+            dw = np.zeros(size)
+            dw[j] = sgn * h
+            dtheta = T0.gamma_inv @ np.concatenate([np.zeros(3), np.linalg.solve(J_x, dw[:9])])
+            s = _state(mission, pin.integrate(model, q0, dtheta), dw[9:18])
+            if delay:
+                mission._held = _increment_force(mission, q0, dw[18:])
             nxt, _ = mission.step(s)
-            cols.append((_z(mission, s), _z(mission, nxt)))
-        Z[:, j] = cols[0][0] - cols[1][0]
-        Zp[:, j] = cols[0][1] - cols[1][1]
-    Phi_fd = Zp @ np.linalg.inv(Z)
+            held = [_force_increment(mission, q0, mission._held)] if delay else []
+            cols.append((np.concatenate([_z(mission, s), dw[18:]]),
+                         np.concatenate([_z(mission, nxt), *held])))
+        W[:, j] = cols[0][0] - cols[1][0]
+        Wp[:, j] = cols[0][1] - cols[1][1]
+    Phi_fd = Wp @ np.linalg.inv(W)
 
     K, D = block_gains(spec.controller, gamma)
     K_x = J_x.T @ K + posture_stiffness(T0.gamma_inv, spec.controller.gains.posture, J_x)
-    Phi = discrete_map(T0.reduced_inertia, D, K_x, J_x, spec.mission.dt,
-                       spec.controller.integrator)
+    Phi = flown_map(T0.reduced_inertia, D, K_x, J_x, spec.mission.dt,
+                    spec.controller.integrator, plant.model, delay)
     return Linearization(Phi_fd, Phi, float(np.abs(Phi_fd - Phi).max()))

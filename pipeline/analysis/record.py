@@ -38,7 +38,7 @@ from pipeline.errors import LogError
 # mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read;
 # /4: harm (the actuators' torque reversals and the bus attitude jitter, eqs. 30–32) and
 # modes_along (the fastest damping mode named along the whole log, eq. 21).
-SCHEMA = "breve-analysis/4"
+SCHEMA = "breve-analysis/5"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
 

@@ -1,4 +1,4 @@
-"""The analysis record (``analysis.json``, schema ``breve-analysis/4``): its typed structure,
+"""The analysis record (``analysis.json``, schema ``breve-analysis/5``): its typed structure,
 its one serialisation, and the check of a record read from disk.
 
 The record is a tree of frozen dataclasses (:class:`CompleteRecord` for a complete log,
@@ -31,20 +31,12 @@ from dataclasses import dataclass, field
 from typing import Any, Union
 
 from pipeline.analysis.harm import Harm
+from pipeline.analysis.margins import Complex, Requirement
+from pipeline.analysis.verdict import ModeLoop, Prediction, RequirementFix
 from pipeline.sim.robot_file import RobotCard
 
 _OPTIONAL = "optional"
 ABSENT_WHILE_NONE = {_OPTIONAL: True}  # a field's metadata: None in some records, then absent
-
-
-@dataclass(frozen=True)
-class Complex:
-    real: float
-    imag: float
-
-    @classmethod
-    def of(cls, z: complex) -> Complex:
-        return cls(z.real, z.imag)
 
 
 @dataclass(frozen=True)
@@ -123,14 +115,6 @@ class FastestMode:
 
 
 @dataclass(frozen=True)
-class DelayedRoot:
-    root: Complex
-    modulus: float
-    period_steps: float | None
-    stable: bool
-
-
-@dataclass(frozen=True)
 class Theory:
     """Stage 4 at the representative step (eqs. 21–24)."""
 
@@ -145,17 +129,20 @@ class Theory:
     dt_star_damping: float
     dt_star_map: float | None
     regime: str
-    rho_modes: list[float]
     eig_dominant: Complex
     spectral_radius: float
+    period_steps: float | None
     update_order: str
     note_order: NoteOrder
     maps: Maps
     fastest_mode: FastestMode
     integrator: str
     dt: float
+    plant: str
     delay_steps: int
-    delayed: DelayedRoot | None
+    requirement: Requirement
+    modes: list[ModeLoop]
+    requirement_fixes: list[RequirementFix]
     M_breve: list[list[float]]
     D_breve: list[list[float]]
     K_breve: list[list[float]]
@@ -206,13 +193,6 @@ class Metrics:
     coverage_final: float
     dt_mu_max_window_max: float
     limit_share: dict[str, float]
-
-
-@dataclass(frozen=True)
-class Prediction:
-    period2_predicted: bool
-    period2_measured: bool
-    agrees: bool
 
 
 @dataclass(frozen=True)
@@ -379,9 +359,11 @@ class DampingTheory:
     mu_max: float
     dt_mu_max: float
     dt_star_damping: float
-    regime: str
-    rho_modes: list[float]
     fastest_mode: FastestMode
+    plant: str
+    delay_steps: int
+    requirement: Requirement
+    modes: list[ModeLoop]
     M_breve: list[list[float]]
     D_breve: list[list[float]]
 

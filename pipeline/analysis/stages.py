@@ -19,7 +19,9 @@ from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm
+from pipeline.analysis.margins import period_steps, root_regime
 from pipeline.analysis.schema import value_at
+from pipeline.analysis.verdict import judge, mode_loops, requirement_fixes
 from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import VerifiedLog
@@ -113,7 +115,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     win = choose_window(n, dt, window_start)
     robot = GiordanoRobot(spec)
 
-    prov, directions, dominant = direction_stages(robot, log, win, check)
+    prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check)
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
     cols = log.columns([c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
@@ -142,7 +144,8 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         bus_rate=bus_rate_statistics(cols["v"][:, 3:6], dt, spec.controller.limits.omega_b_acc),
         metrics=mission_metrics(cols),
         harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
-        prediction=prediction(at_rep, dominant.lag1),
+        prediction=judge(th.record.modes, np.asarray(th.record.M_breve), nu_breve, dt,
+                         th.record.delay_steps, spec.controller.limits),
         versions=meta.versions,
         robot=card,
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
@@ -153,11 +156,12 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
 
 
 def direction_stages(robot: GiordanoRobot, log: VerifiedLog, win: Window, check: bool = True
-                     ) -> tuple[rs.Provenance, list[rs.Direction], rs.Dominant]:
+                     ) -> tuple[rs.Provenance, list[rs.Direction], rs.Dominant, np.ndarray]:
     """Stages 1–3 from q and v alone: Γ rebuilt at every step with the provenance check, the
     velocity projected on its singular directions in the window (eq. 26), each direction's
-    lag-1 (eq. 25) and the dominant one (most step-to-step energy)."""
-    prov, y, sigma = rebuild_and_project(robot, log, win)
+    lag-1 (eq. 25) and the dominant one (most step-to-step energy); and the window's reduced
+    velocity ν̆ = (Γ v)[3:] as the data say it, for the modes' judgement (eq. 36)."""
+    prov, y, sigma, nu_breve = rebuild_and_project(robot, log, win)
     if check:
         require_provenance(log.path, prov)
     bad = np.flatnonzero(~np.isfinite(y).all(axis=1))
@@ -176,7 +180,7 @@ def direction_stages(robot: GiordanoRobot, log: VerifiedLog, win: Window, check:
     top = directions[dom]
     return prov, directions, rs.Dominant(
         index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
-        step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2)))
+        step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))), nu_breve
 
 
 def fastest_mode_record(fixes: ModeFixes) -> rs.FastestMode:
@@ -215,7 +219,7 @@ def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
     log.require(REQUIRED)
     n = log.rows
     robot = GiordanoRobot(spec)
-    prov, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
+    prov, _, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
     require_provenance(path, prov)
     cols = log.columns(["v_breve", *LIMIT_FLAGS])
     bound = np.zeros(n, dtype=bool)
@@ -266,11 +270,12 @@ def _batches(chunks, size: int = BATCH):
 
 
 def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
-                        ) -> tuple[rs.Provenance, np.ndarray, np.ndarray]:
+                        ) -> tuple[rs.Provenance, np.ndarray, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
-    y (eq. 26) and singular values of Γ over the window (singular vectors only there)."""
+    y (eq. 26), the singular values of Γ and the reduced velocity ν̆ = (Γ v)[3:] over the
+    window (singular vectors only there)."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
-    ys, sigmas, V_prev = [], [], None
+    ys, sigmas, nus, V_prev = [], [], [], None
     for chunk in _batches(log.iter_columns(["step", "q", "v", "s_min_G", "kappa_G"])):
         gamma = rebuild_gamma(robot, chunk["q"])
         keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
@@ -282,6 +287,7 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
             sigma[keep] = part.sigma
             ys.append(part.y)
             sigmas.append(part.sigma)
+            nus.append(np.einsum("kij,kj->ki", gamma[keep][:, 3:, :], chunk["v"][keep]))
         # A NaN on either side is the worst difference there is, never "no difference".
         diff = np.abs(sigma[:, -1] - chunk["s_min_G"])
         diff[np.isnan(diff)] = np.inf
@@ -296,7 +302,7 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
                        f"[{win.start}, {win.stop}): the step column is not 0, 1, …")
     prov = rs.Provenance(max_abs_s_min_G=worst, worst_step=worst_step,
                          max_rel_kappa_G=worst_kappa, tolerance=PROVENANCE_TOL)
-    return prov, np.concatenate(ys), np.concatenate(sigmas)
+    return prov, np.concatenate(ys), np.concatenate(sigmas), np.concatenate(nus)
 
 
 class TheoryAtStep(NamedTuple):
@@ -313,8 +319,10 @@ def _spectrum(m: theory.MapSpectrum) -> rs.SpectrumRecord:
 
 
 def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> TheoryAtStep:
-    """Stage 4 at step k: μ, dt·μ_max, dt*, Φ for both integrators, the dominant mode
-    (eqs. 21–24) and its velocity direction for the alignment (eq. 27)."""
+    """Stage 4 at step k: μ, dt·μ_max, dt*, the map of the loop as flown for both integrators
+    (eq. 34: the log's plant and delay), its dominant eigenvalue, every damping mode's loop with
+    its margins (eq. 35), and the dominant mode's velocity direction for the alignment
+    (eq. 27)."""
     row = log.columns(["q", "v", "x_tilde", "s_min_G"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, spec.controller)
@@ -324,29 +332,32 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     K_x = J_x.T @ K + theory.posture_stiffness(T.gamma_inv, spec.controller.gains.posture, J_x)
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)  # the step kernel's layout
     dt, integ = spec.mission.dt, spec.controller.integrator
-    maps = {i: theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, i))
+    plant, delay = spec.mission.plant.model, spec.mission.plant.delay_steps
+    maps = {i: theory.spectrum(theory.flown_map(M_b, D, K_x, J_x, dt, i, plant, delay))
             for i in ("explicit", "imex")}
     own = maps[integ]
     # The same integrator under the note's fully explicit update order (eq. 22): the order
-    # the seed note's published eigenvalue matches; the simulator does not run it.
+    # the seed note's published eigenvalue matches; no loop flies it.
     note_map = theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, integ, "note"))
-    e = own.dominant_vector[9:]
+    e = own.dominant_vector[9:18]
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
-    dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit")
+    dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
+                                         delay=delay)
+    req = rs.Requirement(**spec.requirements.model_dump())
     fixes = mode_fixes(M_b, D, dt)
     record = rs.Theory(
         rule="the given step",
         step=k, t=k * dt, s_min_G=T.s_min_G, gamma=gamma,
         mu=mu.tolist(), mu_max=float(mu[-1]), dt_mu_max=float(dt * mu[-1]),
-        # Two critical steps (eq. 24): the damping-only bound 2/μ_max, and the map's, where
-        # the spectral radius of Φ (stiffness included, explicit) reaches 1.
+        # Two critical steps (eq. 24): the damping-only bound 2/μ_max, and the flown map's
+        # (explicit, stiffness, plant and delay included), where its spectral radius reaches 1.
         dt_star_damping=theory.critical_step(mu[-1]), dt_star_map=dt_bis,
-        regime=theory.regime(dt * mu[-1]) if integ == "explicit" else "unconditionally stable",
-        rho_modes=theory.amplification(dt, mu, integ).tolist(),
+        regime=root_regime(own.dominant),
         eig_dominant=rs.Complex.of(own.dominant),
         spectral_radius=own.spectral_radius,
-        update_order="simulator: x̃ advances with the updated velocity e⁺ (eq. 22)",
+        period_steps=period_steps(own.dominant),
+        update_order=flown_order(plant, delay),
         note_order=rs.NoteOrder(rule="note: x̃ advances with the old velocity e (fully explicit)",
                                 eig_dominant=rs.Complex.of(note_map.dominant),
                                 spectral_radius=note_map.spectral_radius),
@@ -354,16 +365,22 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         # The fastest damping mode named, the gain block that sets it and its fixes (eqs. 21,
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
         fastest_mode=fastest_mode_record(fixes),
-        integrator=integ, dt=dt,
-        # The plant's computation delay (eq. 29): the map above has none; with one step the
-        # fastest mode's characteristic equation is z² − z + dt·μ_max = 0 (eq. 24).
-        delay_steps=spec.mission.plant.delay_steps,
-        delayed=(theory.delayed_mode(float(dt * mu[-1]))
-                 if spec.mission.plant.delay_steps and integ == "explicit" else None),
+        integrator=integ, dt=dt, plant=plant, delay_steps=delay, requirement=req,
+        modes=mode_loops(M_b, D, dt, integ, delay, req),
+        requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req, fixes.gain_block),
         M_breve=M_b.tolist(), D_breve=D.tolist(), K_breve=K.tolist(),
         J_x=J_x.tolist(), K_x=K_x.tolist(),
     )
     return TheoryAtStep(record, direction, row["q"][0])
+
+
+def flown_order(plant: str, delay: int) -> str:
+    """The update the flown map follows (eqs. 22, 34), in words."""
+    if plant == "reduced":
+        return "simulator's update: x̃ advances with the updated velocity e⁺ (eq. 22)"
+    late = f", applied {delay} step{'s' if delay > 1 else ''} late" if delay else ""
+    return ("sampled-data plant: the command held over the step (zero-order hold)" + late +
+            ", x̃ advancing by the trapezoid of e (eq. 34)")
 
 
 # A step "at the bound" moves ω_b by dt·a_max within 1 %: the tolerance claim C16 gives the
@@ -403,21 +420,6 @@ def bus_rate_statistics(w_b: np.ndarray, dt: float, acc_bound: float) -> rs.BusR
     bound = dt * acc_bound
     return rs.BusRate(**asdict(data), step_bound=bound, step_ratio=data.step_median / bound,
                       at_bound_share=float(np.mean(steps >= (1.0 - AT_BOUND_REL) * bound)))
-
-
-def prediction(theory_record: rs.Theory, lag1: float) -> rs.Prediction:
-    """Does the theory's prediction agree with the data (eqs. 22, 24, 25)? Predicted period-2:
-    the map Φ of the run's integrator has a dominant eigenvalue that is real, negative and
-    outside the unit circle, and the plant applies the command without delay (with one step
-    of it the fastest mode's roots of z² − z + dt·μ = 0 are never real and negative).
-    Measured period-2: the dominant direction's lag-1 is negative. NaN agrees with nothing."""
-    eig = theory_record.eig_dominant
-    predicted = bool(eig.real < 0 and abs(eig.imag) <= 1e-9 * abs(eig.real)
-                     and theory_record.spectral_radius > 1
-                     and theory_record.delayed is None)
-    measured = bool(lag1 < 0)
-    return rs.Prediction(period2_predicted=predicted, period2_measured=measured,
-                         agrees=bool(np.isfinite(lag1) and predicted == measured))
 
 
 def mu_max_along(log: VerifiedLog, dt: float, mu_bus: float, floor: float

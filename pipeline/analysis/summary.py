@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord
+from pipeline.analysis.verdict import ModeLoop, Prediction
 
 
 def _num(x: float | None) -> str:
@@ -61,6 +62,7 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
              f"|cos| {record.alignment.abs_cos:.3f}, median ‖Δv‖ "
              f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
              f"{record.provenance.max_abs_s_min_G:.1e} -> {path}"]
+    lines += mode_lines(th.modes, record.prediction, th.plant, th.delay_steps)
     if record.comparison is not None:
         c = record.comparison
         lines.append(f"  vs {c.against}: lag-1 flip {c.lag1_flip}, ‖Δv‖ ratio "
@@ -82,9 +84,49 @@ def imported_lines(record: ImportedRecord, path: Path) -> list[str]:
     if record.damping is not None:
         d, p = record.damping, record.prediction
         lines.append(f"  controller {d.controller} (declared): dt·μ_max {d.dt_mu_max:.3g} "
-                     f"({d.fastest_mode.name}), dt*_damping {d.dt_star_damping:.4g} s; "
-                     f"period-2 predicted {p.period2_predicted}, measured "
-                     f"{p.period2_measured}: {'agree' if p.agrees else 'DISAGREE'}")
+                     f"({d.fastest_mode.name}), dt*_damping {d.dt_star_damping:.4g} s")
+        lines += mode_lines(d.modes, p, d.plant, d.delay_steps)
     lines += [f"  not run: {s.stage}: {s.why.removeprefix('not run: ')}"
               for s in record.stages if not s.ran]
+    return lines
+
+
+def _margins(m: ModeLoop) -> str:
+    g = m.margins
+    pm = "none" if g.phase_margin_deg is None else f"{g.phase_margin_deg:.3g}°"
+    dm = f"{'≥ ' if g.delay_margin_beyond else ''}{g.delay_margin_s * 1e3:.3g} ms"
+    return (f"GM {g.gain_margin_db:+.3g} dB, PM {pm}, DM {dm}: "
+            f"{'meets' if g.meets else 'FAILS'} the requirement")
+
+
+def mode_lines(modes: list[ModeLoop], prediction: Prediction, plant: str, delay: int
+               ) -> list[str]:
+    """The modes judged one by one (eqs. 35, 36): each mode that rings in the theory or in the
+    data, or fails the margins, on a line; the others counted."""
+    late = f", {delay} step of delay" if delay else ""
+    verdict = ("agree" if prediction.agrees else
+               f"undetermined on {prediction.undetermined}" if prediction.undetermined
+               else "DISAGREE")
+    lines = [f"  modes of the loop as flown ({plant} plant{late}): theory and data {verdict}"]
+    quiet = 0
+    for m, j in zip(modes, prediction.modes, strict=True):
+        if not (m.rings or j.measured.rings or not m.margins.meets):
+            quiet += 1
+            continue
+        r = j.measured
+        data = ("undetermined" if r.rings is None else
+                f"rings over {r.period_steps:.3g} steps, {r.peak_to_peak:.3g} {r.unit} peak to "
+                f"peak" if r.rings else "quiet")
+        if j.driven_by is not None:
+            data += f", driven by the {j.driven_by} mode's cycle"
+        if j.held_by is not None:
+            h = j.held_by
+            data += (f", held by {h.limit} ({100 * h.at_bound_share:.0f} % of steps at it; "
+                     f"bang-bang estimate {h.size_estimate:.3g})")
+        period = "" if m.period_steps is None else f", period {m.period_steps:.3g} steps"
+        word = "undetermined" if j.agrees is None else "agree" if j.agrees else "DISAGREE"
+        lines.append(f"    {m.name}: dt·μ {m.dt_mu:.3g}, root |z| {m.modulus:.3g}{period} "
+                     f"({m.regime}); data: {data}; {word}; {_margins(m)}")
+    if quiet:
+        lines.append(f"    {quiet} other modes: stable, quiet in the data, margins met")
     return lines

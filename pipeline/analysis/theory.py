@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.analysis.schema import Complex, DelayedRoot
 from pipeline.sim.breve_controller import damping_rates  # noqa: F401  (μ, eq. 21)
 from pipeline.sim.rotations import skew
 from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24)
@@ -17,6 +16,7 @@ from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24)
     bisect_critical_step,
     critical_step,
     discrete_map,
+    flown_map,
     posture_stiffness,
     spectrum,
 )
@@ -53,22 +53,3 @@ def task_jacobian(x_tilde: np.ndarray, R_te: np.ndarray) -> np.ndarray:
     J[3:6, 3:6] = R_te
     J[6:9, 6:9] = attitude_jacobian(x_tilde[6:9])
     return J
-
-
-def delayed_damping_root(dt_mu: float) -> complex:
-    """The dominant root of z² − z + dt·μ = 0 (eq. 24): a damping mode under forward Euler
-    with its command applied one step late, e_{k+1} = e_k − dt·μ·e_{k−1}. Real and in (0, 1)
-    for dt·μ ≤ ¼; complex of modulus √(dt·μ) above, on the unit circle at dt·μ = 1, never
-    real and negative: a delayed loop does not ring at period 2 but over
-    2π/arg z steps."""
-    return complex(max(np.roots([1.0, -1.0, dt_mu]), key=lambda z: (abs(z), z.imag)))
-
-
-def delayed_mode(dt_mu: float) -> DelayedRoot:
-    """The fastest damping mode under one step of delay (eq. 24): its dominant root, modulus,
-    and the oscillation's period in steps (inf for a real root)."""
-    z = delayed_damping_root(dt_mu)
-    angle = abs(np.angle(z))
-    return DelayedRoot(root=Complex.of(z), modulus=abs(z),
-                       period_steps=float(2 * np.pi / angle) if angle > 0 else float("inf"),
-                       stable=bool(abs(z) < 1))

@@ -255,8 +255,15 @@ def lag1_directions(runs: list[RunData], path: Path,
     _save(fig, path)
 
 
+def flown_words(th) -> str:
+    """The loop as flown, in a few words: its plant and delay (eq. 34)."""
+    late = f", {th.delay_steps} step of delay" if th.delay_steps else ""
+    return f"{th.plant} plant{late}"
+
+
 def eigenvalues(run: RunData, path: Path) -> None:
-    """Eigenvalues of the 18×18 map for both integrators, against the unit circle."""
+    """Eigenvalues of the map of the loop as flown (eq. 34: the run's plant and delay) for
+    both integrators, against the unit circle."""
     th = run.record.theory
     fig, ax = plt.subplots(figsize=(5, 5), layout="constrained")
     t = np.linspace(0, 2 * np.pi, 400)
@@ -271,7 +278,8 @@ def eigenvalues(run: RunData, path: Path) -> None:
     lim = max(1.2, 1.1 * max(th.maps.explicit.spectral_radius, th.maps.imex.spectral_radius))
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=f"Re λ ({DIMLESS})",
            ylabel=f"Im λ ({DIMLESS})",
-           title=label(f"Φ at step {th.step} of {run.name} (dt {th.dt:g} s)"))
+           title=label(f"Φ as flown ({flown_words(th)}) at step {th.step} of {run.name} "
+                       f"(dt {th.dt:g} s)"))
     ax.legend(loc="lower left")
     _save(fig, path)
 
@@ -469,9 +477,10 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
     """Left: the (dt, μ) plane of one damping mode under forward Euler (eqs. 23, 24), with
     the bound dt·μ = 2 and the margin dt·μ = 1 (the bound under one step of delay), each run's
     fastest mode and every sweep point (μ_max at its dt), marked by its measured dominant
-    lag-1. Right: the locus of Φ's eigenvalues (eq. 22) as dt varies, for each run's
-    linearisation, against the unit circle."""
-    from pipeline.sim.stability import discrete_map
+    lag-1; runs at one point share a mark. Right: the locus of the eigenvalues of each
+    explicit run's map as flown (eq. 34: its plant and delay) as dt varies, against the unit
+    circle."""
+    from pipeline.sim.stability import flown_map
 
     st = _styles(runs, styles)
     fig, ax = plt.subplot_mosaic([["region", "locus"], ["key1", "key1"], ["key2", "key2"]],
@@ -503,23 +512,37 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
     t = np.linspace(0, 2 * np.pi, 400)
     a2.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
     locus_dts = np.geomspace(0.002, 0.05, 60)
+    # Runs whose fastest mode sits at one point of the plane (same dt, μ, integrator and
+    # delay) share one mark and one key entry.
+    groups: dict[tuple, list[RunData]] = {}
     for r in runs:
         th = r.record.theory
-        fm = th.fastest_mode
+        key = (th.dt, round(th.fastest_mode.mu, 6), th.integrator, th.delay_steps)
+        groups.setdefault(key, []).append(r)
+    for (dt, mu, integ, delay), members in groups.items():
+        th = members[0].record.theory
+        mk = ("*" if integ == "explicit" else "P") if not delay else "D"
+        late = f", delay {delay}: bound dt·μ = 1" if delay else ""
+        a1.plot(dt, mu, mk, ms=11, color=st[members[0].name].color,
+                label=f"{', '.join(m.name for m in members)}: {th.fastest_mode.name} "
+                      f"({integ}{late})")
+    seen: set[tuple] = set()
+    for r in runs:
+        th = r.record.theory
         s = st[r.name]
-        mk = "*" if th.integrator == "explicit" else "P"
-        a1.plot(th.dt, fm.mu, mk, ms=11, color=s.color,
-                label=f"{r.name}: {fm.name} ({th.integrator})")
-        if th.integrator != "explicit":
+        key = (th.plant, th.delay_steps, tuple(np.asarray(th.M_breve).ravel().round(12)))
+        if th.integrator != "explicit" or key in seen:
             continue
+        seen.add(key)
         M, D, K_x, J_x = (np.asarray(m) for m in (th.M_breve, th.D_breve, th.K_x, th.J_x))
-        ev = np.array([np.linalg.eigvals(discrete_map(M, D, K_x, J_x, dt, "explicit"))
-                       for dt in locus_dts])
+        ev = np.array([np.linalg.eigvals(flown_map(M, D, K_x, J_x, dt, "explicit", th.plant,
+                                                   th.delay_steps)) for dt in locus_dts])
         a2.scatter(ev.real.ravel(), ev.imag.ravel(), s=4, c=np.repeat(locus_dts, ev.shape[1]),
                    cmap="viridis", norm=matplotlib.colors.LogNorm())
-        here = np.linalg.eigvals(discrete_map(M, D, K_x, J_x, th.dt, "explicit"))
+        here = np.linalg.eigvals(flown_map(M, D, K_x, J_x, th.dt, "explicit", th.plant,
+                                           th.delay_steps))
         a2.plot(here.real, here.imag, "x", ms=8, color=s.color,
-                label=f"{r.name} at dt = {th.dt:g} s")
+                label=f"{r.name} at dt = {th.dt:g} s ({flown_words(th)})")
     a1.set(xscale="log", yscale="log", xlim=(dts[0], dts[-1]), ylim=(10.0, 1e3),
            xlabel="dt (s)", ylabel="μ of the mode (1/s)",
            title=label("Stability of one damping mode under forward Euler"))
@@ -527,7 +550,8 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
         locus_dts[0], locus_dts[-1]))
     fig.colorbar(sm, ax=a2, label="dt (s)")
     a2.set(xlim=(-4, 1.5), ylim=(-1.6, 1.6), xlabel=f"Re λ ({DIMLESS})",
-           ylabel=f"Im λ ({DIMLESS})", title=label("Eigenvalues of Φ (explicit) as dt varies"))
+           ylabel=f"Im λ ({DIMLESS})",
+           title=label("Eigenvalues of Φ as flown (explicit) as dt varies"))
     a2.set_aspect("equal", adjustable="box")
     # The keys in panels of their own below the plots, which they would otherwise cover.
     for key, src, ncol in ((ax["key1"], a1, 2), (ax["key2"], a2, 3)):

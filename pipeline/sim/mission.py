@@ -140,14 +140,16 @@ class Mission:
 
     def critical_steps(self, s: LoopState) -> tuple[float, float | None]:
         """(dt*_damping, dt*_map) at state ``s`` for the spec's integrator (eq. 24): 2/μ_max,
-        and the step at which the spectral radius of the map Φ (stiffness included) reaches 1
-        (None if none below 1 s). The online guard evaluates them once, at the start."""
+        and the step at which the spectral radius of the map of the loop as flown (eq. 34:
+        stiffness, plant and delay included) reaches 1 (None if none below 1 s). The online
+        guard evaluates them once, at the start."""
         M, D, K_x, J_x = self.linearised_loop(s)
         # C-ordered, as the step kernel passes it: one compiled specialisation (the kernel
         # makes the same contiguous copy itself).
         mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
-        integrator = self.spec.controller.integrator
-        return critical_step(mu_max), bisect_critical_step(M, D, K_x, J_x, integrator)
+        integrator, plant = self.spec.controller.integrator, self.spec.mission.plant
+        return critical_step(mu_max), bisect_critical_step(
+            M, D, K_x, J_x, integrator, plant=plant.model, delay=plant.delay_steps)
 
     def linearised_loop(self, s: LoopState) -> tuple[np.ndarray, ...]:
         """(M̆, D̆, K_x, J_x) at state ``s``: the reduced inertia, the damping gains after the γ
@@ -365,8 +367,9 @@ def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str,
            else "set mission.dt below")
     gain = _fix_text(fixes) if integrator == "explicit" else ""
     return (f"step 0: mission.dt = {dt:.4g} s is at or above the critical step dt*_map = "
-            f"{dt_map:.4g} s (the spectral radius of the discrete map Φ, stiffness included, "
-            f"reaches 1; the damping-only bound dt*_damping = 2/μ_max = {dt_damping:.4g} s, "
+            f"{dt_map:.4g} s (the spectral radius of the map of the loop as flown, eq. 34: "
+            f"stiffness, plant and delay included, reaches 1; the damping-only bound "
+            f"dt*_damping = 2/μ_max = {dt_damping:.4g} s, "
             f"μ_max the {fixes.mode.name} mode's) under the {integrator} integrator: the loop is "
             f"unstable. Fix: {fix} {dt_map:.4g} s{gain}")
 

@@ -14,6 +14,13 @@ Two update orders of the configuration (eq. 22):
     note:       x̃⁺ = x̃ + dt J_x e   (fully explicit: q moves with the old velocity, the order
                 the seed note's eigenvalue −2.81 matches)
                 Φ = [[I, dt J_x], [B, A_e]]
+
+The loop as flown (eq. 34, :func:`flown_map`): the plant that moves the robot between two
+instants and the computation delay. Under the sampled-data plant the command is held over the
+step (zero-order hold), so e ramps from e_k to e_{k+1} and x̃ advances by the trapezoid
+dt J_x (e_k + e_{k+1})/2; with d steps of delay the step applies the velocity increment
+computed d instants before, carried in the state. Every spectral radius the analysis prints
+is this map's.
 """
 
 from __future__ import annotations
@@ -32,25 +39,70 @@ def critical_step(mu_max: float) -> float:
 UPDATE_ORDERS = ("simulator", "note")
 
 
+def command_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, dt: float,
+                integrator: str) -> tuple[np.ndarray, np.ndarray]:
+    """(A_e, B) of the controller's command e_cmd = A_e e + B x̃ (eq. 22): the velocity error
+    the step asks for at the next instant, explicit or imex."""
+    n = M_breve.shape[0]
+    if integrator == "explicit":
+        return (np.eye(n) - dt * np.linalg.solve(M_breve, D_breve),
+                -dt * np.linalg.solve(M_breve, K_x))
+    if integrator == "imex":
+        W = M_breve + dt * D_breve
+        return np.linalg.solve(W, M_breve), -dt * np.linalg.solve(W, K_x)
+    raise ValueError(f"unknown integrator {integrator!r}")
+
+
 def discrete_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
                  dt: float, integrator: str, order: str = "simulator") -> np.ndarray:
     """Φ, the 18×18 map z⁺ = Φ z of the linearised loop (eq. 22), for the simulator's update
     order (x̃ advances with e⁺) or the note's fully explicit one (x̃ advances with e)."""
     n = M_breve.shape[0]
-    if integrator == "explicit":
-        A_e = np.eye(n) - dt * np.linalg.solve(M_breve, D_breve)
-        B = -dt * np.linalg.solve(M_breve, K_x)
-    elif integrator == "imex":
-        W = M_breve + dt * D_breve
-        A_e = np.linalg.solve(W, M_breve)
-        B = -dt * np.linalg.solve(W, K_x)
-    else:
-        raise ValueError(f"unknown integrator {integrator!r}")
+    A_e, B = command_map(M_breve, D_breve, K_x, dt, integrator)
     if order == "simulator":
         return np.block([[np.eye(n) + dt * J_x @ B, dt * J_x @ A_e], [B, A_e]])
     if order == "note":
         return np.block([[np.eye(n), dt * J_x], [B, A_e]])
     raise ValueError(f"unknown update order {order!r} (one of {', '.join(UPDATE_ORDERS)})")
+
+
+PLANTS = ("reduced", "sampled")
+
+
+def flown_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
+              dt: float, integrator: str, plant: str = "reduced", delay: int = 0
+              ) -> np.ndarray:
+    """Φ of the loop as flown (eq. 34): the integrator's command, the plant that moves the
+    robot between two instants, and ``delay`` steps of computation delay.
+
+    ``reduced``: the simulator's update of eq. 22 (the commanded velocity is the next one; no
+    delay: the simulator has none). ``sampled``: the command held over the step (zero-order
+    hold), its velocity increment p_k = e_cmd,k − e_k = B x̃_k + (A_e − I) e_k applied
+    ``delay`` instants late, e_{k+1} = e_k + p_{k−d}, x̃_{k+1} = x̃_k + dt J_x (e_k + e_{k+1})/2.
+    The state is z = [x̃; e] (18), and with a delay the increments computed and not yet
+    applied, oldest first: w = [x̃; e; p_{k−d}; …; p_{k−1}] (18 + 9d)."""
+    n = M_breve.shape[0]
+    if plant == "reduced":
+        if delay:
+            raise ValueError("the reduced plant (the simulator's update) has no delay")
+        return discrete_map(M_breve, D_breve, K_x, J_x, dt, integrator)
+    if plant != "sampled":
+        raise ValueError(f"unknown plant {plant!r} (one of {', '.join(PLANTS)})")
+    A_e, B = command_map(M_breve, D_breve, K_x, dt, integrator)
+    eye = np.eye(n)
+    increment = np.hstack([B, A_e - eye])  # p_k from z_k
+    if delay == 0:
+        x_row = np.hstack([eye, dt * J_x]) + 0.5 * dt * J_x @ increment
+        return np.vstack([x_row, np.hstack([np.zeros((n, n)), eye]) + increment])
+    size = 2 * n + delay * n
+    Phi = np.zeros((size, size))
+    oldest = slice(2 * n, 3 * n)
+    Phi[:n, :n], Phi[:n, n:2 * n], Phi[:n, oldest] = eye, dt * J_x, 0.5 * dt * J_x
+    Phi[n:2 * n, n:2 * n], Phi[n:2 * n, oldest] = eye, eye
+    for j in range(delay - 1):  # the queue moves up by one slot
+        Phi[2 * n + j * n:3 * n + j * n, 3 * n + j * n:4 * n + j * n] = eye
+    Phi[size - n:, :2 * n] = increment  # the newest slot: this step's increment
+    return Phi
 
 
 @dataclass(frozen=True)
@@ -69,14 +121,17 @@ def spectrum(Phi: np.ndarray) -> MapSpectrum:
 
 
 def bisect_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
-                         lo: float = 1e-6, hi: float = 1.0, tol: float = 1e-10) -> float | None:
-    """Smallest dt in [lo, hi] with spectral radius of Φ(dt) reaching 1, by bisection.
+                         lo: float = 1e-6, hi: float = 1.0, tol: float = 1e-10,
+                         plant: str = "reduced", delay: int = 0) -> float | None:
+    """Smallest dt in [lo, hi] with spectral radius of the flown map Φ(dt) (eq. 34) reaching
+    1, by bisection.
 
     Assumes ρ(Φ(lo)) < 1 (a stable small step); returns None if ρ(Φ(hi)) < 1 (no bound in
     range, as for imex). The radius crosses 1 once on this bracket for a damped loop.
     """
     def radius(dt: float) -> float:
-        return spectrum(discrete_map(M_breve, D_breve, K_x, J_x, dt, integrator)).spectral_radius
+        return spectrum(flown_map(M_breve, D_breve, K_x, J_x, dt, integrator, plant,
+                                  delay)).spectral_radius
 
     if radius(hi) < 1.0:
         return None

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-from pipeline.verify.checks_base import Outcome, check, fmt, maxdiff, random_state, robot
+from pipeline.verify.checks_base import Outcome, check, fmt, maxdiff, random_state, rng, robot
 from pipeline.verify.checks_base import spec as check_spec
 
 
@@ -43,6 +43,104 @@ def _discrete_map() -> Outcome:
     return Outcome(f"spec {check_spec().name} at its start pose, static reference, 18 central "
                    "differences of one Mission.step (h = 1e-6)", max(diffs), 1e-6,
                    "; ".join(parts))
+
+
+@check("34", "Φ of the loop as flown (the sampled-data plant, 0 and 1 step of delay, explicit "
+       "and imex) vs the finite-difference linearisation of Mission.step about a rest state, "
+       "the held command perturbed with the state", "pipeline.sim.stability.flown_map")
+def _flown_map() -> Outcome:
+    from pipeline.analysis.linearization import simulator_map
+    from pipeline.spec import with_overrides
+
+    parts, diffs = [], []
+    for delay in (0, 1):
+        for integ in ("explicit", "imex"):
+            lin = simulator_map(with_overrides(check_spec(), {
+                "controller.integrator": integ, "mission.plant.model": "sampled",
+                "mission.plant.delay_steps": delay}))
+            rho = float(np.max(np.abs(np.linalg.eigvals(lin.Phi_theory))))
+            parts.append(f"{integ}, delay {delay}: {fmt(lin.max_abs_diff)} (ρ {rho:.4g})")
+            diffs.append(lin.max_abs_diff)
+    return Outcome(f"spec {check_spec().name} at its start pose, static reference, one central "
+                   "difference per state coordinate (h = 1e-6)", max(diffs), 1e-6,
+                   "; ".join(parts))
+
+
+def _held_loop_grows(g: float, total_delay: float, steps: int = 3000) -> float:
+    """|e| over the last 100 steps against the 100 before the last 1000, of the scalar loop
+    ė(t) = u(t − τ)/dt with u_k = −g e_k held over each step, simulated in the time domain:
+    the input over step k is the commands whose held intervals, shifted by τ = total_delay
+    steps, overlap it (eq. 35's plant, without its polynomial)."""
+    e = np.zeros(steps + 1)
+    e[0] = 1.0
+    u = np.zeros(steps + 1)
+    n, frac = int(np.floor(total_delay)), total_delay - np.floor(total_delay)
+    for k in range(steps):
+        u[k] = -g * e[k]
+        # Over [k, k + 1) the shifted holds of commands k − n (its last 1 − frac) and
+        # k − n − 1 (its first frac... of the step) overlap it.
+        a = u[k - n] if k - n >= 0 else 0.0
+        b = u[k - n - 1] if k - n - 1 >= 0 else 0.0
+        e[k + 1] = e[k] + (1.0 - frac) * a + frac * b
+    late, early = np.abs(e[-100:]).max(), np.abs(e[-1100:-1000]).max()
+    return float(late / early)
+
+
+@check("35", "gain, phase and delay margins of a mode's loop L(z) = g z^−d/(z − 1) vs "
+       "independent computations: the closed loop at g·GM on the unit circle (eigenvalues of "
+       "its companion matrix), |L| and ∠L at ω_c by complex arithmetic, the delay margin by "
+       "a time-domain simulation of the held loop 5 % either side of it",
+       "pipeline.analysis.margins.margins")
+def _margins() -> Outcome:
+    from pipeline.analysis import margins as mg
+
+    req = mg.Requirement(6.0, 30.0, 1.0)
+    diffs, parts = [], []
+    for g, d in ((1.28, 0), (0.5, 0), (0.427, 1), (0.793, 1), (1.2, 1)):
+        m = mg.margins(g, d, 1.0, req)
+        gm = 10 ** (m.gain_margin_db / 20)
+        poly = np.r_[1.0, -1.0, np.zeros(d)]
+        poly[-1] += g * gm
+        companion = np.diag(np.ones(d), -1) if d else np.zeros((1, 1))
+        companion[0, :] = -poly[1:]
+        diffs.append(abs(np.max(np.abs(np.linalg.eigvals(companion))) - 1.0))
+        if m.phase_margin_deg is not None and m.phase_margin_deg > 0:
+            z = np.exp(1j * m.gain_crossover)
+            L = g * z ** (-d) / (z - 1.0)
+            diffs += [abs(abs(L) - 1.0),
+                      abs(np.degrees(np.angle(L)) + 180.0 - m.phase_margin_deg)]
+            dm = m.delay_margin_s  # dt = 1: in steps
+            below, above = (_held_loop_grows(g, d + 0.95 * dm), _held_loop_grows(g, d + 1.05 * dm))
+            if not below < 1.0 < above:
+                raise AssertionError(f"g {g}, d {d}: the held loop's growth at 0.95 and 1.05 × "
+                                     f"the delay margin {dm:.4g} steps: {below:.3g}, {above:.3g}")
+            parts.append(f"g {g:g}, d {d}: GM {m.gain_margin_db:.3g} dB, PM "
+                         f"{m.phase_margin_deg:.3g}°, DM {dm:.4g} steps")
+        else:
+            parts.append(f"g {g:g}, d {d}: GM {m.gain_margin_db:.3g} dB, no phase margin")
+    return Outcome("five loops (g, d); the simulation decays at 0.95 × DM and grows at 1.05 × "
+                   "DM for each with a phase margin", max(diffs), 1e-10, "; ".join(parts))
+
+
+@check("36", "ring() on synthetic series with known answers: oscillations of period 6 and 2 on "
+       "a slow trend (their period and peak to peak), white noise and a smooth series (no ring)",
+       "pipeline.analysis.ringing.ring")
+def _ring() -> Outcome:
+    from pipeline.analysis.ringing import ring
+
+    k = np.arange(1000, dtype=float)
+    slow = 0.3 * np.sin(2 * np.pi * k / 1333) + 1e-4 * k
+    diffs = []
+    for period, amp in ((6.0, 0.45), (2.0, 0.15)):
+        r = ring(slow + amp * np.cos(2 * np.pi * k / period), "x", "1")
+        if not r.rings:
+            raise AssertionError(f"a period-{period:g} oscillation does not ring: {r}")
+        diffs += [abs(r.period_steps - period) / period, abs(r.peak_to_peak - 2 * amp) / (2 * amp)]
+    for name, x in (("white noise", rng(36).standard_normal(1000)), ("smooth", slow)):
+        if ring(x, name, "1").rings:
+            raise AssertionError(f"{name} rings")
+    return Outcome("1000 steps; a 1333-step sine and a trend under each", max(diffs), 2e-3,
+                   "largest relative error of period and peak to peak")
 
 
 @check("23", "ρ = 1 − dt·μ (explicit), 1/(1 + dt·μ) (imex) vs the eigenvalue of the discrete "
@@ -116,6 +214,9 @@ def _mission_step() -> Outcome:
 CHECKS = (
     _damping_rates,
     _discrete_map,
+    _flown_map,
+    _margins,
+    _ring,
     _amplification,
     _critical_step,
     _mission_step,

@@ -1,0 +1,199 @@
+"""One damping mode's loop as flown, in the terms a review uses (eq. 35): its characteristic
+root, and its gain, phase and delay margins against the spec's requirement.
+
+In damping mode i (M̆⁻¹D̆ w = μ w, eq. 21) the velocity error obeys, with the stiffness dropped
+(slow beside the damping, as in eqs. 23–24), e_{k+1} = e_k + u_{k−d} with the controller's
+velocity increment u_k = −g e_k, where
+
+    g = dt·μ                 explicit (eq. 15a)
+    g = dt·μ / (1 + dt·μ)    imex (eq. 15b: e_cmd = e/(1 + dt·μ))
+
+and d the plant's computation delay in steps (eq. 29; the simulator's update has none). Both
+plants give the velocity this map: the update of eq. 22 sets e_{k+1} to the command, and the
+zero-order hold of eq. 29 moves it there at a constant acceleration. The loop, broken at the
+command, is
+
+    L(z) = g z^{−d} / (z − 1),        closed loop:  z^d (z − 1) + g = 0.
+
+Its margins have closed forms (∠(e^{jω} − 1) = π/2 + ω/2, |e^{jω} − 1| = 2 sin(ω/2)):
+
+    phase crossover  ω_180 = π/(2d + 1),      gain margin  GM = 2 sin(π/(2(2d + 1))) / g
+    gain crossover   ω_c = 2 arcsin(g/2)  (g ≤ 2),   phase margin  PM = π/2 − (d + ½) ω_c
+
+and no gain crossover when g > 2 (|L| > 1 at every frequency). The delay margin is the
+smallest further input delay τ ≥ 0, a fraction of a step included, that puts a root on the
+unit circle: with the command held (zero-order hold) and applied τ later, a step receives the
+command of n = ⌊d + τ/dt⌋ instants before for the last (1 − δ) of it and the one before that
+for the first δ (δ = frac(d + τ/dt)), so
+
+    z^{n+1} (z − 1) + g ((1 − δ) z + δ) = 0,
+
+solved for its roots and bisected in τ, up to a horizon (PM/ω_c, the phase-lag estimate, is
+not exact for a held command: for d = 0 and 1 ≤ g < 2 the exact margin is dt/g, the estimate
+smaller).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+UNIT = 1.0  # a root of this modulus is on the unit circle: marginal
+
+
+@dataclass(frozen=True)
+class Complex:
+    real: float
+    imag: float
+
+    @classmethod
+    def of(cls, z: complex) -> Complex:
+        return cls(z.real, z.imag)
+
+
+def loop_gain(dt_mu: float, integrator: str) -> float:
+    """g, the mode's velocity increment per step per unit error (eq. 35)."""
+    if integrator == "explicit":
+        return float(dt_mu)
+    if integrator == "imex":
+        return float(dt_mu / (1.0 + dt_mu))
+    raise ValueError(f"unknown integrator {integrator!r}")
+
+
+def characteristic(g: float, delay: int, fraction: float = 0.0) -> np.ndarray:
+    """Coefficients (highest power first) of z^{n+1}(z − 1) + g((1 − δ)z + δ), n = delay,
+    δ = fraction: the mode's closed loop with a held command applied delay + fraction steps
+    late (eq. 35)."""
+    c = np.zeros(delay + 3)
+    c[0], c[1] = 1.0, -1.0  # z^{n+2} − z^{n+1}
+    c[-2] += g * (1.0 - fraction)
+    c[-1] += g * fraction
+    return c if fraction else c[:-1]  # without a fraction the polynomial is z^{n}(z − 1) + g
+
+
+def dominant_root(g: float, delay: int, fraction: float = 0.0) -> complex:
+    """The root of largest modulus (then largest imaginary part) of :func:`characteristic`."""
+    roots = np.roots(characteristic(g, delay, fraction))
+    return complex(max(roots, key=lambda z: (round(abs(z), 14), z.imag)))
+
+
+def period_steps(z: complex) -> float | None:
+    """The oscillation period of a root in steps, 2π/|arg z| (2 for a negative real root);
+    None for a positive real one (no oscillation)."""
+    angle = abs(math.atan2(z.imag, z.real))
+    return None if angle == 0.0 else 2.0 * math.pi / angle
+
+
+def root_regime(z: complex) -> str:
+    """The behaviour a mode's dominant root gives the linear loop (eqs. 23, 35). 'Unstable'
+    is the linear loop's: what holds the motion, and whether it grows, is the data's to say."""
+    m, period = abs(z), period_steps(z)
+    kind = ("monotone" if period is None else "period-2" if abs(z.imag) <= 1e-12 * m
+            else f"oscillation over {period:.3g} steps")
+    if math.isclose(m, UNIT, rel_tol=0.0, abs_tol=1e-12):
+        return f"marginal ({kind})"
+    if m > UNIT:
+        return f"unstable: {kind}, ×{m:.3g} per step in the linear loop"
+    if period is None:
+        return "stable: monotone decay"
+    return "stable: decaying 2-cycle" if kind == "period-2" else f"stable: decaying {kind}"
+
+
+@dataclass(frozen=True)
+class Margins:
+    """The margins of one mode's loop as flown (eq. 35) and the requirement's verdict."""
+
+    gain_margin_db: float
+    phase_crossover: float  # rad per step
+    phase_margin_deg: float | None  # None: no gain crossover (|L| > 1 at every frequency)
+    gain_crossover: float | None  # rad per step
+    delay_margin_s: float  # the further delay that destabilises it; 0 when unstable as flown
+    delay_margin_beyond: bool  # stable over the whole horizon: delay_margin_s is a lower bound
+    phase_lag_delay_s: float | None  # PM/ω_c·dt, the phase-lag estimate, for comparison
+    meets_gain: bool
+    meets_phase: bool
+    meets_delay: bool
+
+    @property
+    def meets(self) -> bool:
+        return self.meets_gain and self.meets_phase and self.meets_delay
+
+
+def gain_margin(g: float, delay: int) -> tuple[float, float]:
+    """(GM, ω_180): the factor on g that makes the loop marginal, at the phase crossover."""
+    w180 = math.pi / (2 * delay + 1)
+    return 2.0 * math.sin(w180 / 2.0) / g, w180
+
+
+def phase_margin(g: float, delay: int) -> tuple[float | None, float | None]:
+    """(PM in rad, ω_c), or (None, None) when |L| > 1 at every frequency (g > 2)."""
+    if g > 2.0:
+        return None, None
+    wc = 2.0 * math.asin(g / 2.0)
+    return math.pi / 2.0 - (delay + 0.5) * wc, wc
+
+
+def _stable(g: float, total: float) -> bool:
+    n = math.floor(total)
+    return abs(dominant_root(g, n, total - n)) < UNIT
+
+
+# Delay margins are resolved up to this many steps of further delay: beyond, the mode meets any
+# requirement a review would set (a slow mode's margin is hundreds of steps, whose roots would
+# cost a polynomial of that degree each) and the record says "at least".
+DELAY_HORIZON_STEPS = 16
+_SCAN = 1.0 / 16.0  # steps: the scan's grid before the bisection
+
+
+def delay_margin(g: float, delay: int, dt: float, tol: float = 1e-9) -> tuple[float, bool]:
+    """(τ, beyond): the smallest further delay τ ≥ 0 (s), fractions of a step included, that
+    leaves the mode's loop unstable (eq. 35), 0 when it is unstable as flown; scanned from the
+    declared delay on a grid of 1/16 step, then bisected to ``tol`` steps. ``beyond``: stable
+    over the whole horizon of ``DELAY_HORIZON_STEPS``, τ is then that horizon (a lower
+    bound)."""
+    if not _stable(g, delay):
+        return 0.0, False
+    pm, wc = phase_margin(g, delay)
+    # A slow mode: its phase-lag estimate lies beyond the horizon by more than a held command
+    # moves it (under a step), and the loop is stable at the horizon: no scan needed.
+    if (pm is not None and wc and pm / wc > DELAY_HORIZON_STEPS + 2
+            and _stable(g, delay + DELAY_HORIZON_STEPS)):
+        return DELAY_HORIZON_STEPS * dt, True
+    lo = 0.0
+    while _stable(g, delay + lo + _SCAN):
+        lo += _SCAN
+        if lo >= DELAY_HORIZON_STEPS:
+            return DELAY_HORIZON_STEPS * dt, True
+    hi = lo + _SCAN
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _stable(g, delay + mid) else (lo, mid)
+    return lo * dt, False
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """Margins a review asks of every mode (the spec's ``requirements`` block)."""
+
+    gain_margin_db: float
+    phase_margin_deg: float
+    delay_margin_steps: float
+
+
+def margins(g: float, delay: int, dt: float, req: Requirement) -> Margins:
+    """Gain, phase and delay margins of the loop L(z) = g z^{−d}/(z − 1) (eq. 35) against
+    ``req``."""
+    gm, w180 = gain_margin(g, delay)
+    pm, wc = phase_margin(g, delay)
+    dm, beyond = delay_margin(g, delay, dt)
+    gm_db = 20.0 * math.log10(gm)
+    pm_deg = None if pm is None else math.degrees(pm)
+    return Margins(
+        gain_margin_db=gm_db, phase_crossover=w180, phase_margin_deg=pm_deg, gain_crossover=wc,
+        delay_margin_s=dm, delay_margin_beyond=beyond,
+        phase_lag_delay_s=None if pm is None or pm <= 0 else pm / wc * dt,
+        meets_gain=bool(gm_db >= req.gain_margin_db),
+        meets_phase=bool(pm_deg is not None and pm_deg >= req.phase_margin_deg),
+        meets_delay=bool(dm >= req.delay_margin_steps * dt))

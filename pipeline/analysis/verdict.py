@@ -1,0 +1,281 @@
+"""The damping modes judged one by one (eqs. 35, 36): each mode's loop as flown (its root,
+regime, period and margins against the requirement), what its coordinate does in the data, and
+whether the two agree.
+
+A mode the theory calls unstable (its root on or outside the unit circle) must ring in its own
+modal coordinate, η_i = w_iᵀ M̆ ν̆ (w_i M̆-normalised, ν̆ = Γ(q) v rebuilt from the log); a mode
+it calls stable must not ring there over the analysis window, which starts after the start-up
+transients. The run agrees only if every mode does. A ring is held by a limit when the mode's
+gain block sits at one of its bounds (eq. 16) on most steps of the window: its acceleration
+bound (each step moves the block by dt·a_max) or its rate bound. An acceleration bound acts as
+a relay: its describing function puts the cycle at the loop's phase crossover, period
+2π/ω_180 = 2(2d + 1) steps (eq. 35; 2 undelayed, 6 with one step of delay, whatever the linear
+root's period), of size (P/2)·dt·a_max peak to peak; a rate bound holds 2·w_max.
+
+A mode called stable that rings at the period of a mode called unstable (within 5 %), with a
+smaller modal amplitude than that one's (η²/2 is a mode's kinetic energy, so this compares
+energies), is driven by it: the limits of eq. 16 bound the norm of a 3-block, which couples the
+block's axes, and the coupling terms the linear modes leave out pass the cycle on. It is listed
+as driven, with its driver, and is no disagreement; a stable mode that rings alone, or louder
+than every unstable mode of its period, is one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.analysis import margins as mg
+from pipeline.analysis.ringing import Ring, ring
+from pipeline.sim.stability import GAIN_BLOCKS, REDUCED_SYMBOLS, damping_modes
+
+# The limit names of each gain block's 3-block of ν̆ (eq. 16), and its units.
+BLOCK_LIMITS = ("omega_b", "nu_e_lin", "nu_e_ang")
+BLOCK_UNITS = ("rad/s", "m/s", "rad/s")
+AT_BOUND_REL = 0.01  # a step or a rate within 1 % of its bound is at the bound (as eq. 16's C16)
+MOST = 0.5
+SAME_PERIOD = 0.05  # relative: two rings of one period (the periodogram's peaks)
+
+
+@dataclass(frozen=True)
+class ModeLoop:
+    """One damping mode's loop as flown (eq. 35)."""
+
+    name: str
+    symbol: str  # its reduced coordinate's symbol (ω_b,z)
+    axis: int  # the reduced coordinate it is named by
+    gain_block: str  # the block whose damping gain sets it (its largest share)
+    share: float
+    mu: float
+    dt_mu: float
+    loop_gain: float  # g of eq. 35
+    root: mg.Complex
+    modulus: float
+    period_steps: float | None  # None: a real positive root, no oscillation
+    regime: str
+    rings: bool  # the linear loop sustains it: the root on or outside the unit circle
+    margins: mg.Margins
+    vector: list[float]  # w (9), M̆-normalised
+
+
+def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
+               delay: int, req: mg.Requirement) -> list[ModeLoop]:
+    """Every damping mode of M̆⁻¹D̆, fastest first, with its loop as flown (eqs. 21, 35)."""
+    out = []
+    for m in damping_modes(M_breve, D_breve):
+        g = mg.loop_gain(dt * m.mu, integrator)
+        z = mg.dominant_root(g, delay)
+        out.append(ModeLoop(
+            name=m.name, symbol=REDUCED_SYMBOLS[m.axis], axis=m.axis,
+            gain_block=GAIN_BLOCKS[m.block],
+            share=float(m.shares[m.block]), mu=m.mu, dt_mu=dt * m.mu, loop_gain=g,
+            root=mg.Complex.of(z), modulus=abs(z), period_steps=mg.period_steps(z),
+            regime=mg.root_regime(z), rings=bool(abs(z) >= mg.UNIT),
+            margins=mg.margins(g, delay, dt, req), vector=m.vector.tolist()))
+    return out
+
+
+@dataclass(frozen=True)
+class RequirementFix:
+    """One change of the loop and whether every mode then meets the requirement (eq. 35), at
+    the run's plant and delay: the theory of a fix, to be flown before it is called one."""
+
+    change: str  # the spec field and the value it takes
+    value: float | None  # that value (None: the integrator, or no value suffices)
+    meets: bool
+    worst_mode: str  # the mode of least gain margin after the change
+    gain_margin_db: float
+    phase_margin_deg: float | None
+    delay_margin_s: float
+    steps_per_s: float  # cost: control steps per second of mission
+
+
+def _meets_fast(g: float, delay: int, req: mg.Requirement) -> bool:
+    """Whether a mode's loop meets ``req``: the closed forms of GM and PM, and stability with
+    the required further delay (the delay margin's test at its one point)."""
+    gm, _ = mg.gain_margin(g, delay)
+    pm, _ = mg.phase_margin(g, delay)
+    total = delay + req.delay_margin_steps
+    n = int(np.floor(total))
+    return bool(20 * np.log10(gm) >= req.gain_margin_db and pm is not None
+                and np.degrees(pm) >= req.phase_margin_deg
+                and abs(mg.dominant_root(g, n, total - n)) < mg.UNIT)
+
+
+def _all_meet(mus: np.ndarray, dt: float, integrator: str, delay: int,
+              req: mg.Requirement) -> bool:
+    # Every margin of eq. 35 falls as g grows, and g grows with μ: the fastest mode decides.
+    return _meets_fast(mg.loop_gain(dt * float(np.max(mus)), integrator), delay, req)
+
+
+def _bisect_largest(ok, lo: float, hi: float, rtol: float = 1e-9) -> float | None:
+    """The largest x in [lo, hi] with ok(x), ok falling from true to false once; None if not
+    ok(lo)."""
+    if ok(hi):
+        return hi
+    if not ok(lo):
+        return None
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ok(mid) else (lo, mid)
+    return lo
+
+
+def _fix(change: str, value: float | None, M: np.ndarray, D: np.ndarray, dt: float,
+         integrator: str, delay: int, req: mg.Requirement) -> RequirementFix:
+    modes = mode_loops(M, D, dt, integrator, delay, req)
+    worst = min(modes, key=lambda m: m.margins.gain_margin_db)
+    return RequirementFix(change=change, value=value, meets=all(m.margins.meets for m in modes),
+                          worst_mode=worst.name, gain_margin_db=worst.margins.gain_margin_db,
+                          phase_margin_deg=worst.margins.phase_margin_deg,
+                          delay_margin_s=worst.margins.delay_margin_s, steps_per_s=1.0 / dt)
+
+
+def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
+                      delay: int, req: mg.Requirement, gain_block: str) -> list[RequirementFix]:
+    """The loop as it is, and three changes against the requirement at its plant and delay
+    (eq. 35): the implicit damping at this step; the largest step at which every mode meets
+    it; the largest damping gain of ``gain_block`` (the fastest mode's) that does."""
+    def mus(D: np.ndarray) -> np.ndarray:
+        return np.array([m.mu for m in damping_modes(M_breve, D)])
+
+    base = mus(D_breve)
+    out = [_fix("as flown", None, M_breve, D_breve, dt, integrator, delay, req)]
+    if integrator == "explicit":
+        out.append(_fix("controller.integrator: imex", None, M_breve, D_breve, dt, "imex",
+                        delay, req))
+    dt_ok = _bisect_largest(lambda h: _all_meet(base, h, integrator, delay, req), 1e-6, dt)
+    out.append(_fix(f"mission.dt ≤ {dt_ok:.4g} s" if dt_ok else "mission.dt: none suffices",
+                    dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req))
+    b = GAIN_BLOCKS.index(gain_block)
+    now = float(D_breve[3 * b, 3 * b])
+
+    def with_gain(d: float) -> np.ndarray:
+        D = D_breve.copy()
+        D[3 * b:3 * b + 3, 3 * b:3 * b + 3] = d * np.eye(3)
+        return D
+
+    # The spec's damping gains are positive: the search stops a millionth above zero.
+    d_ok = _bisect_largest(lambda d: _all_meet(mus(with_gain(d)), dt, integrator, delay, req),
+                           1e-6 * now, now)
+    out.append(_fix(f"controller.gains.{gain_block}.D ≤ {d_ok:.4g}" if d_ok is not None
+                    else f"controller.gains.{gain_block}.D: none suffices", d_ok, M_breve,
+                    with_gain(d_ok if d_ok is not None else now), dt, integrator, delay, req))
+    return out
+
+
+@dataclass(frozen=True)
+class HeldBy:
+    """The limit of the mode's block at its bound on most steps, and the size it allows."""
+
+    limit: str  # a key of controller.limits
+    bound: float
+    at_bound_share: float
+    period_estimate: float | None  # steps: the describing function's, 2π/ω_180 = 2(2d + 1)
+    size_estimate: float  # peak to peak: (P/2)·dt·a_max for an acceleration bound, 2·w_max
+    rule: str
+
+
+@dataclass(frozen=True)
+class ModeJudgement:
+    mode: str
+    symbol: str
+    predicted_rings: bool
+    predicted_period_steps: float | None
+    measured: Ring
+    modal_peak_to_peak: float | None  # of η itself, the mode's own scale (√(2·energy))
+    held_by: HeldBy | None
+    driven_by: str | None  # a stable mode ringing with an unstable one of its period
+    agrees: bool | None  # None: the data cannot say (undetermined)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The theory's modes against the data, one by one (eq. 36)."""
+
+    rule: str
+    modes: list[ModeJudgement]
+    omega_b: list[Ring]  # each component of the bus rate, for what rings there
+    undetermined: int
+    agrees: bool
+
+
+RULE = ("each damping mode of the loop as flown: predicted to ring when its root (eq. 35) is on "
+        "or outside the unit circle; measured to ring when most of its modal coordinate's "
+        "motion over the window is at periods of at most 20 steps and most of that is one "
+        "spectral line (eq. 36); a stable mode ringing at an unstable one's period with less "
+        "modal energy is driven by it, no disagreement; agrees only if every mode does")
+
+
+def omega_b_rings(nu_breve: np.ndarray) -> list[Ring]:
+    """What each component of ω_b = ν̆[0:3] does over the window (eq. 36)."""
+    return [ring(nu_breve[:, i], REDUCED_SYMBOLS[i], "rad/s") for i in range(3)]
+
+
+def held_by(nu_block: np.ndarray, delay: int, dt: float, limits) -> HeldBy | None:
+    """The bound of a gain block's ν̆ 3-block (``limits``: its acceleration and rate bounds)
+    that the data sit at on most steps, or None; for an acceleration bound, the cycle it
+    holds as a relay: a describing function puts it at the loop's phase crossover, period
+    2π/ω_180 = 2(2d + 1) steps (eq. 35: 2 without delay, 6 with one step), of size
+    (P/2)·dt·a_max peak to peak."""
+    name, a_max, w_max = limits
+    steps = np.linalg.norm(np.diff(nu_block, axis=0), axis=1)
+    rates = np.linalg.norm(nu_block, axis=1)
+    at_acc = float(np.mean(steps >= (1.0 - AT_BOUND_REL) * dt * a_max))
+    at_rate = float(np.mean(rates >= (1.0 - AT_BOUND_REL) * w_max))
+    if max(at_acc, at_rate) <= MOST:
+        return None
+    if at_acc >= at_rate:
+        p = 2.0 * np.pi / mg.gain_margin(1.0, delay)[1]
+        return HeldBy(limit=f"{name}_acc", bound=a_max, at_bound_share=at_acc,
+                      period_estimate=p, size_estimate=0.5 * p * dt * a_max,
+                      rule="the acceleration bound as a relay: the cycle at the loop's phase "
+                           "crossover, period 2π/ω_180, (P/2)·dt·a_max peak to peak")
+    return HeldBy(limit=f"{name}_rate", bound=w_max, at_bound_share=at_rate,
+                  period_estimate=None, size_estimate=2.0 * w_max,
+                  rule="the rate at its bound: 2·w_max peak to peak")
+
+
+def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: float,
+          delay: int, limits) -> Prediction:
+    """Each mode of ``modes`` against its modal coordinate in ``nu_breve`` (the window's ν̆,
+    N×9) (eq. 36), on a loop of ``delay`` steps of delay. ``limits``: the controller's
+    ``limits`` block."""
+    rings = []
+    for m in modes:
+        w = np.asarray(m.vector)
+        eta = nu_breve @ (M_breve @ w)
+        rings.append((ring(eta, m.name, BLOCK_UNITS[m.axis // 3], scale=w[m.axis]),
+                      ring(eta, m.name, "√(kg·m²)·rad/s")))
+    judged = []
+    for m, (measured, modal) in zip(modes, rings, strict=True):
+        b = m.axis // 3
+        name = BLOCK_LIMITS[b]
+        bounds = (name, getattr(limits, f"{name}_acc"), getattr(limits, f"{name}_rate"))
+        held = (held_by(nu_breve[:, 3 * b:3 * b + 3], delay, dt, bounds)
+                if measured.rings else None)
+        driver = (None if m.rings or not measured.rings else
+                  _driver(measured, modal, [(o, r) for o, r in zip(modes, rings, strict=True)
+                                            if o.rings]))
+        agrees = (None if measured.rings is None else
+                  True if driver is not None else measured.rings == m.rings)
+        judged.append(ModeJudgement(mode=m.name, symbol=m.symbol, predicted_rings=m.rings,
+                                    predicted_period_steps=m.period_steps, measured=measured,
+                                    modal_peak_to_peak=modal.peak_to_peak, held_by=held,
+                                    driven_by=driver, agrees=agrees))
+    undetermined = sum(j.agrees is None for j in judged)
+    return Prediction(rule=RULE, modes=judged, omega_b=omega_b_rings(nu_breve),
+                      undetermined=undetermined,
+                      agrees=bool(judged and undetermined == 0 and all(j.agrees for j in judged)))
+
+
+def _driver(measured: Ring, modal: Ring, unstable: list[tuple[ModeLoop, tuple[Ring, Ring]]]
+            ) -> str | None:
+    """The unstable mode that drives a stable one's ring: ringing at its period (within
+    ``SAME_PERIOD``) with the larger modal amplitude; the loudest such, or None."""
+    louder = [(r[1].peak_to_peak, o.name) for o, r in unstable
+              if r[0].rings and r[0].period_steps and measured.period_steps
+              and abs(r[0].period_steps / measured.period_steps - 1.0) <= SAME_PERIOD
+              and r[1].peak_to_peak > modal.peak_to_peak]
+    return max(louder)[1] if louder else None
