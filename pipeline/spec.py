@@ -233,6 +233,8 @@ class Camera(_Block):
     d_min: Positive = 0.5
     d_max: Positive = 10.0
     max_angle_deg: Annotated[float, Field(gt=0, le=90, allow_inf_nan=False)] = 75.0
+    # The image's size (square, px): a stated figure, for the roll's smear in pixels (eq. 32).
+    resolution_px: PositiveInt = 1024
 
 
 class Spec(_Block):

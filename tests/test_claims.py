@@ -316,7 +316,13 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "sampled_dt010": "short_omega_ripple_sampled_dt010",
         "sampled_delay_dt010": "short_omega_ripple_sampled_delay_dt010",
         "sampled_delay": "short_omega_ripple_sampled_delay",
-        "sampled_torque": "short_omega_ripple_sampled_torque"}
+        "sampled_torque": "short_omega_ripple_sampled_torque",
+        # The fixes are 30 s missions already.
+        "fix_imex": "omega_ripple_sampled_imex", "fix_dt": "omega_ripple_sampled_dt0075",
+        "fix_gains": "omega_ripple_sampled_gains",
+        "fix_delay_imex": "omega_ripple_sampled_delay_imex",
+        "fix_delay_dt": "omega_ripple_sampled_delay_dt0035",
+        "fix_delay_gains": "omega_ripple_sampled_delay_gains"}
     assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
                                                         for n, r in full.runs.items()}
     assert {n: r.against for n, r in ci.runs.items()} == {n: r.against

@@ -201,3 +201,30 @@ def test_the_wrong_mode_ringing_reads_disagree(roll_rings):
     assert not modes[ROLL].predicted_rings and modes[ROLL].measured.rings
     assert modes[YAW].agrees is False and modes[ROLL].agrees is False
     assert rec.prediction.agrees is False
+
+
+def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
+    """The fix table's verdicts: the delayed run rings (unstable); the implicit damping with
+    one step of delay, stable and quiet in every mode, misses the requirement (its bus yaw's
+    gain margin is 2.0 dB) and is not called a fix; the smaller step that meets it is."""
+    from pipeline.reports.figures import RunData
+    from pipeline.reports.fixes import FIX, decisions, fix_tables
+
+    runs = []
+    for name in ("omega_ripple_sampled_delay_imex", "omega_ripple_sampled_delay_dt0035"):
+        o = run_spec(with_overrides(load_spec(name), {"mission.duration": 12.0}, name=name),
+                     tmp_path)
+        log = verify_log(o.path)
+        runs.append(RunData(name, analyze_log(log), log, log.meta.spec, name))
+    log = verify_log(delayed["short_omega_ripple_sampled_delay"].log)
+    runs.append(RunData("delayed", delayed["short_omega_ripple_sampled_delay"], log,
+                        log.meta.spec, "delayed"))
+    (table,) = fix_tables(runs)
+    verdict = {r.run: r.verdict for r in table.rows}
+    assert verdict["delayed"].startswith("unstable")
+    assert verdict["omega_ripple_sampled_delay_imex"].startswith(
+        "stable and quiet, misses the requirement")
+    assert verdict["omega_ripple_sampled_delay_dt0035"] == FIX
+    (d,) = decisions(runs)
+    assert "omega_ripple_sampled_delay_dt0035" in d.fix and "not a fix" in d.fix
+    assert d.verdict.startswith("robots/seed_ur3_box.xml: on sampled-data plant")

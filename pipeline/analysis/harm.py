@@ -122,3 +122,35 @@ def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.
                                       at_instants_deg=_rms(at_instants),
                                       between_instants_deg=_rms(between),
                                       step_deg_median=float(np.median(steps))))
+
+
+@dataclass(frozen=True)
+class RollSmear:
+    """The camera's roll about its boresight over the window, and the smear it makes at the
+    image corner (eq. 32): None where the window is too short to judge (eq. 36)."""
+
+    rate_peak_to_peak: float | None  # rad/s: the short-period part of ω_e,z
+    angle_peak_to_peak_deg: float | None  # its integral, the roll angle's short-period part
+    resolution_px: int  # the stated image size (square), px
+    fov_deg: float
+    smear_px: float | None  # the corner's motion: the angle × half the diagonal, px
+
+
+def roll_smear(roll_rate: np.ndarray, dt: float, resolution_px: int, fov_deg: float
+               ) -> RollSmear:
+    """The camera roll's smear (eq. 32): θ_k = dt Σ ω_e,z up to k (the roll at the instants),
+    its short-period part's peak to peak (periods up to 20 steps, eq. 36), times the corner's
+    distance from the image centre, resolution/√2 px: a roll about the boresight turns the
+    image about its centre, and moves the corner most."""
+    from pipeline.analysis.ringing import MIN_STEPS, short_period_part
+
+    rate = np.asarray(roll_rate, dtype=float)
+    if rate.size < MIN_STEPS or not np.all(np.isfinite(rate)):
+        return RollSmear(None, None, resolution_px, fov_deg, None)
+    angle = short_period_part(np.cumsum(rate) * dt)
+    fast = short_period_part(rate)
+    pp = float(angle.max() - angle.min())
+    return RollSmear(rate_peak_to_peak=float(fast.max() - fast.min()),
+                     angle_peak_to_peak_deg=float(np.degrees(pp)), resolution_px=resolution_px,
+                     fov_deg=fov_deg, smear_px=float(pp * resolution_px / np.sqrt(2.0)))
+

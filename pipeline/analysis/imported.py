@@ -135,7 +135,7 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
     row = log.columns(["q", "v"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, controller.controller)
-    _, D = block_gains(controller.controller, gamma)
+    K, D = block_gains(controller.controller, gamma)
     M_b = T.reduced_inertia
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)
     dt, integ = log.spec.mission.dt, controller.controller.integrator
@@ -148,7 +148,7 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
         fastest_mode=fastest_mode_record(mode_fixes(M_b, D, dt)),
         plant=controller.mission.plant.model, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req),
+        modes=mode_loops(M_b, D, dt, integ, delay, req, K),
         M_breve=M_b.tolist(), D_breve=D.tolist())
 
 

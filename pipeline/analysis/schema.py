@@ -30,7 +30,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Union
 
-from pipeline.analysis.harm import Harm
+from pipeline.analysis.harm import Harm, RollSmear
 from pipeline.analysis.margins import Complex, Requirement
 from pipeline.analysis.verdict import ModeLoop, Prediction, RequirementFix
 from pipeline.sim.robot_file import RobotCard
@@ -272,6 +272,7 @@ class CompleteRecord(Identity):
     bus_rate: BusRate
     metrics: Metrics
     harm: Harm
+    camera_roll: RollSmear
     prediction: Prediction
     versions: dict[str, str]
     robot: RobotCard

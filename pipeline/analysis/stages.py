@@ -18,7 +18,7 @@ import numpy as np
 from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
-from pipeline.analysis.harm import harm
+from pipeline.analysis.harm import harm, roll_smear
 from pipeline.analysis.margins import period_steps, root_regime
 from pipeline.analysis.schema import value_at
 from pipeline.analysis.verdict import judge, mode_loops, requirement_fixes
@@ -144,6 +144,8 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         bus_rate=bus_rate_statistics(cols["v"][:, 3:6], dt, spec.controller.limits.omega_b_acc),
         metrics=mission_metrics(cols),
         harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
+        camera_roll=roll_smear(nu_breve[:, 8], dt, spec.camera.resolution_px,
+                               spec.camera.fov_deg),
         prediction=judge(th.record.modes, np.asarray(th.record.M_breve), nu_breve, dt,
                          th.record.delay_steps, spec.controller.limits),
         versions=meta.versions,
@@ -366,8 +368,8 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
         fastest_mode=fastest_mode_record(fixes),
         integrator=integ, dt=dt, plant=plant, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req),
-        requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req, fixes.gain_block),
+        modes=mode_loops(M_b, D, dt, integ, delay, req, K),
+        requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req),
         M_breve=M_b.tolist(), D_breve=D.tolist(), K_breve=K.tolist(),
         J_x=J_x.tolist(), K_x=K_x.tolist(),
     )

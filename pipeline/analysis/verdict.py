@@ -49,6 +49,8 @@ class ModeLoop:
     share: float
     mu: float
     dt_mu: float
+    omega_n: float  # √(wᵀ K̆ w), rad/s: the mode's undamped frequency under the block stiffness
+    damping_ratio: float | None  # μ/(2 ω_n): > 1 overdamped; None without stiffness
     loop_gain: float  # g of eq. 35
     root: mg.Complex
     modulus: float
@@ -60,16 +62,22 @@ class ModeLoop:
 
 
 def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
-               delay: int, req: mg.Requirement) -> list[ModeLoop]:
-    """Every damping mode of M̆⁻¹D̆, fastest first, with its loop as flown (eqs. 21, 35)."""
+               delay: int, req: mg.Requirement, K_breve: np.ndarray | None = None
+               ) -> list[ModeLoop]:
+    """Every damping mode of M̆⁻¹D̆, fastest first, with its loop as flown (eqs. 21, 35);
+    with the block stiffness K̆, each mode's undamped frequency and damping ratio (the
+    stiffness projected on the mode: the bandwidth and damping a gain cut changes)."""
     out = []
     for m in damping_modes(M_breve, D_breve):
         g = mg.loop_gain(dt * m.mu, integrator)
         z = mg.dominant_root(g, delay)
+        wn = (float(np.sqrt(max(m.vector @ K_breve @ m.vector, 0.0)))
+              if K_breve is not None else 0.0)
         out.append(ModeLoop(
             name=m.name, symbol=REDUCED_SYMBOLS[m.axis], axis=m.axis,
             gain_block=GAIN_BLOCKS[m.block],
-            share=float(m.shares[m.block]), mu=m.mu, dt_mu=dt * m.mu, loop_gain=g,
+            share=float(m.shares[m.block]), mu=m.mu, dt_mu=dt * m.mu, omega_n=wn,
+            damping_ratio=m.mu / (2 * wn) if wn > 0 else None, loop_gain=g,
             root=mg.Complex.of(z), modulus=abs(z), period_steps=mg.period_steps(z),
             regime=mg.root_regime(z), rings=bool(abs(z) >= mg.UNIT),
             margins=mg.margins(g, delay, dt, req), vector=m.vector.tolist()))
@@ -82,7 +90,8 @@ class RequirementFix:
     the run's plant and delay: the theory of a fix, to be flown before it is called one."""
 
     change: str  # the spec field and the value it takes
-    value: float | None  # that value (None: the integrator, or no value suffices)
+    value: float | None  # that value (None: the integrator or the gains, or none suffices)
+    gains: dict[str, float]  # the damping gains cut, by block (empty: no cut)
     meets: bool
     worst_mode: str  # the mode of least gain margin after the change
     gain_margin_db: float
@@ -123,20 +132,29 @@ def _bisect_largest(ok, lo: float, hi: float, rtol: float = 1e-9) -> float | Non
 
 
 def _fix(change: str, value: float | None, M: np.ndarray, D: np.ndarray, dt: float,
-         integrator: str, delay: int, req: mg.Requirement) -> RequirementFix:
+         integrator: str, delay: int, req: mg.Requirement,
+         gains: dict[str, float] | None = None) -> RequirementFix:
     modes = mode_loops(M, D, dt, integrator, delay, req)
     worst = min(modes, key=lambda m: m.margins.gain_margin_db)
-    return RequirementFix(change=change, value=value, meets=all(m.margins.meets for m in modes),
+    return RequirementFix(change=change, value=value, gains=gains or {},
+                          meets=all(m.margins.meets for m in modes),
                           worst_mode=worst.name, gain_margin_db=worst.margins.gain_margin_db,
                           phase_margin_deg=worst.margins.phase_margin_deg,
                           delay_margin_s=worst.margins.delay_margin_s, steps_per_s=1.0 / dt)
 
 
+def _with_gain(D_breve: np.ndarray, block: int, d: float) -> np.ndarray:
+    D = D_breve.copy()
+    D[3 * block:3 * block + 3, 3 * block:3 * block + 3] = d * np.eye(3)
+    return D
+
+
 def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
-                      delay: int, req: mg.Requirement, gain_block: str) -> list[RequirementFix]:
+                      delay: int, req: mg.Requirement) -> list[RequirementFix]:
     """The loop as it is, and three changes against the requirement at its plant and delay
     (eq. 35): the implicit damping at this step; the largest step at which every mode meets
-    it; the largest damping gain of ``gain_block`` (the fastest mode's) that does."""
+    it; the damping gains cut, block by block, to the largest at which every mode that block
+    sets (its largest share) meets it."""
     def mus(D: np.ndarray) -> np.ndarray:
         return np.array([m.mu for m in damping_modes(M_breve, D)])
 
@@ -148,20 +166,27 @@ def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integ
     dt_ok = _bisect_largest(lambda h: _all_meet(base, h, integrator, delay, req), 1e-6, dt)
     out.append(_fix(f"mission.dt ≤ {dt_ok:.4g} s" if dt_ok else "mission.dt: none suffices",
                     dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req))
-    b = GAIN_BLOCKS.index(gain_block)
-    now = float(D_breve[3 * b, 3 * b])
+    D, cuts = D_breve.copy(), {}
+    for b, block in enumerate(GAIN_BLOCKS):
+        def block_meets(d: float, b: int = b, D: np.ndarray = D) -> bool:
+            return all(_meets_fast(mg.loop_gain(dt * m.mu, integrator), delay, req)
+                       for m in damping_modes(M_breve, _with_gain(D, b, d)) if m.block == b)
 
-    def with_gain(d: float) -> np.ndarray:
-        D = D_breve.copy()
-        D[3 * b:3 * b + 3, 3 * b:3 * b + 3] = d * np.eye(3)
-        return D
-
-    # The spec's damping gains are positive: the search stops a millionth above zero.
-    d_ok = _bisect_largest(lambda d: _all_meet(mus(with_gain(d)), dt, integrator, delay, req),
-                           1e-6 * now, now)
-    out.append(_fix(f"controller.gains.{gain_block}.D ≤ {d_ok:.4g}" if d_ok is not None
-                    else f"controller.gains.{gain_block}.D: none suffices", d_ok, M_breve,
-                    with_gain(d_ok if d_ok is not None else now), dt, integrator, delay, req))
+        now = float(D[3 * b, 3 * b])
+        if block_meets(now):
+            continue
+        # The spec's damping gains are positive: the search stops a millionth above zero.
+        d_ok = _bisect_largest(block_meets, 1e-6 * now, now)
+        if d_ok is None:
+            cuts = {}
+            break
+        D, cuts[block] = _with_gain(D, b, d_ok), d_ok
+    words = ", ".join(f"{k}.D ≤ {v:.4g}" for k, v in cuts.items())
+    out.append(_fix(f"controller.gains: {words}" if cuts else
+                    "controller.gains: as they are" if out[0].meets else
+                    "controller.gains: no cut of the damping gains suffices",
+                    None, M_breve, D if cuts else D_breve, dt, integrator, delay, req,
+                    gains=cuts))
     return out
 
 

@@ -26,6 +26,7 @@ from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
 from pipeline.provenance.keys import report_version
 from pipeline.reports import figures as fg
+from pipeline.reports.fixes import decisions, fix_tables
 from pipeline.reports.mechanism import mechanism_context
 from pipeline.reports.templating import render
 from pipeline.store.door import ArtefactStore
@@ -254,6 +255,11 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
         drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
         cc = cross_check if cross_check is not None else build_cross_check()
         written = render_cross_check(out, cc) + render_imported(out, imported)
+        tables = fix_tables(runs)
+        written += [render("fixes.md.j2", out / "fixes.md", tables=tables,
+                           code_version=report_version()),
+                    render("fixes.html.j2", out / "fixes.html", tables=tables,
+                           code_version=report_version())]
         mechanisms = []
         for r in runs:
             if getattr(r.record, "comparison", None) is None:  # single or diverged: no pair
@@ -277,7 +283,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
                       "ci/CLAIMS.md", "ci/claims.json")
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
-                   imported=imported,
+                   imported=imported, tables=tables, decisions=decisions(runs),
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,
                    pages=pages, sweeps=sweeps, code_version=report_version())

@@ -120,6 +120,20 @@ def _attitude_jitter() -> Outcome:
                    "rad")
 
 
+@check("32", "the camera roll's smear of a roll rate ±w alternating on a slow one: the angle "
+       "zigzags by w·dt, so it reads w·dt·resolution/√2 px", "pipeline.analysis.harm.roll_smear")
+def _roll_smear() -> Outcome:
+    from pipeline.analysis.harm import roll_smear
+
+    w, dt, px = 0.3, 0.03, 1024
+    n = np.arange(1000)
+    smear = roll_smear(0.05 * np.sin(2 * np.pi * n / 900) + w * (-1.0) ** n, dt, px, 40.0)
+    expected = w * dt * px / np.sqrt(2)
+    return Outcome(f"1000 steps of ±{w:g} rad/s at dt {dt:g} s on a 900-step sine, {px} px: "
+                   f"{smear.smear_px:.4g} px against {expected:.4g}",
+                   abs(smear.smear_px / expected - 1.0), 1e-4, "relative difference")
+
+
 def _seed_model():
     from pipeline.sim.robot import GiordanoRobot
     from pipeline.spec import load_spec
@@ -174,5 +188,6 @@ CHECKS = (
     _period2_amplitude,
     _reversal_share,
     _attitude_jitter,
+    _roll_smear,
     _consistency,
 )

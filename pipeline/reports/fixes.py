@@ -1,0 +1,203 @@
+"""The fix tables (issue 32): per robot and loop as flown (plant and delay), every analysed run,
+what flew (step, integrator, damping gains), whether every mode meets the spec's requirement
+(eq. 35), what rings in the data (eq. 36) and the cost; a run is called a fix only where every
+mode meets the requirement on the loop it declares, the data ring in no mode and the theory and
+data agree mode by mode. Every cell is read from the runs' analysis records.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pipeline.analysis.schema import CompleteRecord
+from pipeline.reports.figures import RunData
+
+FIX = "fix"
+
+
+@dataclass(frozen=True)
+class FixRow:
+    run: str
+    dt: float
+    integrator: str
+    gains: str  # the damping gains D of the bus and camera-orientation blocks
+    fastest: str  # the fastest mode's symbol
+    fastest_mu: float  # its rate μ (1/s), the mode's bandwidth
+    fastest_zeta: float | None  # its damping ratio under the block stiffness
+    meets: bool  # every mode meets the requirement, on this loop
+    least: str  # the mode of least gain margin
+    gain_margin_db: float
+    phase_margin_deg: float | None
+    delay_margin_ms: float
+    rings: str  # the modes that ring of their own in the data ("" none)
+    agrees: bool
+    pointing_err_deg_max: float
+    boresight_err_deg_max: float
+    steps_per_s: float
+    verdict: str
+
+
+@dataclass(frozen=True)
+class FixTable:
+    robot: str
+    loop: str
+    requirement: str
+    rows: list[FixRow]
+
+    @property
+    def fixes(self) -> list[FixRow]:
+        return [r for r in self.rows if r.verdict == FIX]
+
+
+def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float) -> str:
+    if not agrees:
+        return "theory and data disagree"
+    if rings:
+        return f"unstable: {', '.join(rings)} ring"
+    if not meets:
+        return f"stable and quiet, misses the requirement ({least}: {gm:.3g} dB)"
+    return FIX
+
+
+def fix_row(r: RunData) -> FixRow:
+    rec: CompleteRecord = r.record
+    th, p = rec.theory, rec.prediction
+    least = min(th.modes, key=lambda m: m.margins.gain_margin_db)
+    rings = [j.symbol for j in p.modes if j.measured.rings and not j.driven_by]
+    meets = all(m.margins.meets for m in th.modes)
+    gains = r.spec.get("controller", {}).get("gains", {})
+    fast = th.modes[0]
+    return FixRow(
+        run=r.name, dt=rec.dt, integrator=rec.integrator,
+        gains=f"bus {gains.get('bus', {}).get('D', '?')}, "
+              f"cam_ori {gains.get('cam_ori', {}).get('D', '?')}",
+        fastest=fast.symbol, fastest_mu=fast.mu, fastest_zeta=fast.damping_ratio,
+        meets=meets, least=least.symbol, gain_margin_db=least.margins.gain_margin_db,
+        phase_margin_deg=least.margins.phase_margin_deg,
+        delay_margin_ms=1e3 * least.margins.delay_margin_s, rings=", ".join(rings),
+        agrees=p.agrees, pointing_err_deg_max=rec.metrics.pointing_err_deg_max,
+        boresight_err_deg_max=rec.metrics.boresight_err_deg_max, steps_per_s=1.0 / rec.dt,
+        verdict=_verdict(meets, rings, p.agrees, least.symbol, least.margins.gain_margin_db))
+
+
+def _loop_words(plant: str, delay: int) -> str:
+    if plant == "reduced":
+        return "the simulator's update (eq. 22)"
+    late = f", {delay} step of delay" if delay else ", no delay"
+    return f"sampled-data plant, command held over the step{late} (eq. 34)"
+
+
+def fix_tables(runs: list[RunData]) -> list[FixTable]:
+    """One table per robot file and loop as flown, the runs by cost (steps per second)."""
+    groups: dict[tuple, list[RunData]] = {}
+    for r in runs:
+        if not isinstance(r.record, CompleteRecord):
+            continue
+        th = r.record.theory
+        robot = str(r.spec.get("robot", {}).get("file", "?"))
+        groups.setdefault((robot, th.plant != "reduced", th.delay_steps, th.plant), []).append(r)
+    tables = []
+    for (robot, _, delay, plant), members in sorted(groups.items()):
+        req = members[0].record.theory.requirement
+        rows = sorted((fix_row(r) for r in members), key=lambda x: (x.steps_per_s, x.run))
+        tables.append(FixTable(
+            robot=robot, loop=_loop_words(plant, delay),
+            requirement=(f"GM ≥ {req.gain_margin_db:g} dB, PM ≥ {req.phase_margin_deg:g}°, "
+                         f"DM ≥ {req.delay_margin_steps:g} step"), rows=rows))
+    return tables
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the index opens with, per robot (issue 32): the verdict on its loop of record,
+    the severity in mission units, the recommended fix with its margin and cost."""
+
+    robot: str
+    verdict: str
+    severity: str | None
+    fix: str | None
+
+
+def _loop_of_record(tables: list[FixTable], runs: dict[str, RunData]) -> FixTable:
+    """The loop a flight computer flies, of those the robot's runs cover: the sampled-data
+    plant with the most delay, else the sampled plant, else the simulator's update."""
+    def rank(t: FixTable) -> tuple:
+        th = runs[t.rows[0].run].record.theory
+        return (th.plant == "sampled", th.delay_steps)
+
+    return max(tables, key=rank)
+
+
+def _severity(rec: CompleteRecord, spec: dict) -> str:
+    h, c = rec.harm, rec.camera_roll
+    limit = float(spec.get("mission", {}).get("plant", {}).get("bus_torque_max", 0.0) or 0.0)
+    against = (f"against its {limit:g} N·m limit" if limit > 0 else
+               "no bus torque limit declared (mission.plant.bus_torque_max)")
+    smear = ("" if c.smear_px is None else
+             f"; camera roll smear {c.smear_px:.3g} px at the image corner "
+             f"({c.resolution_px} px, {c.fov_deg:g}° field of view)")
+    return (f"the bus torque reverses {h.bus_torque.reversals_per_s:.3g} times a second about "
+            f"{h.bus_torque.channel} at a period-2 amplitude of "
+            f"{h.bus_torque.period2_amplitude:.3g} N·m ({against}); bus attitude jitter "
+            f"{h.attitude.jitter_deg:.3g}°{smear}")
+
+
+def _change(a: RunData, b: RunData) -> str:
+    """What run ``b`` changes from run ``a``: step, integrator, damping gains."""
+    ra, rb = a.record, b.record
+    parts = []
+    if ra.dt != rb.dt:
+        parts.append(f"dt {ra.dt:g} → {rb.dt:g} s")
+    if ra.integrator != rb.integrator:
+        parts.append(f"{rb.integrator} integrator")
+    ga = a.spec.get("controller", {}).get("gains", {})
+    gb = b.spec.get("controller", {}).get("gains", {})
+    cuts = [f"{k}.D {ga[k]['D']:g} → {gb[k]['D']:g}" for k in ("bus", "cam_pos", "cam_ori")
+            if k in ga and k in gb and ga[k].get("D") != gb[k].get("D")]
+    if cuts:
+        fa, fb = ra.theory.modes[0], rb.theory.modes[0]
+        zeta = (f", ζ {fa.damping_ratio:.3g} → {fb.damping_ratio:.3g}"
+                if fa.damping_ratio is not None and fb.damping_ratio is not None else "")
+        parts.append(f"damping {', '.join(cuts)} (fastest mode's μ {fa.mu:.3g} → "
+                     f"{fb.mu:.3g} 1/s{zeta})")
+    return "; ".join(parts) or "the same loop"
+
+
+def decisions(runs: list[RunData]) -> list[Decision]:
+    """Per robot, on its loop of record: the cheapest run that rings, what harms, and the
+    cheapest flown fix (fewest steps per second, then the larger gain margin)."""
+    by_name = {r.name: r for r in runs}
+    out = []
+    tables = fix_tables(runs)
+    for robot in dict.fromkeys(t.robot for t in tables):
+        t = _loop_of_record([x for x in tables if x.robot == robot], by_name)
+        bad = next((r for r in t.rows if r.rings), None)
+        if bad is None:
+            out.append(Decision(robot, f"{robot}: on {t.loop}, no run rings in any mode.",
+                                None, None))
+            continue
+        rec = by_name[bad.run].record
+        ringing = [(m, j) for m, j in zip(rec.theory.modes, rec.prediction.modes, strict=True)
+                   if j.measured.rings and not j.driven_by]
+        held = {j.held_by.limit for _, j in ringing if j.held_by}
+        verdict = (f"{robot}: on {t.loop}, {bad.run} (dt {bad.dt:g} s, {bad.integrator}) is "
+                   f"unstable: " + ", ".join(f"{m.symbol} (|z| {m.modulus:.3g})"
+                                             for m, _ in ringing)
+                   + f" ring over {ringing[0][1].measured.period_steps:.3g} steps"
+                   + (f", held by {', '.join(sorted(held))}" if held else "")
+                   + f"; theory and data {'agree' if bad.agrees else 'DISAGREE'} mode by mode.")
+        fixes = sorted(t.fixes, key=lambda r: (r.steps_per_s, -r.gain_margin_db))
+        if fixes:
+            f = fixes[0]
+            not_fix = [r for r in t.rows if r.verdict != FIX and not r.rings]
+            fix = (f"Fix: {f.run}, {_change(by_name[bad.run], by_name[f.run])}: every mode "
+                   f"meets {t.requirement} (least {f.least}: {f.gain_margin_db:.3g} dB, "
+                   + (f"{f.phase_margin_deg:.3g}°, " if f.phase_margin_deg is not None else "")
+                   + f"{f.delay_margin_ms:.3g} ms), flown clean, at {f.steps_per_s:.4g} steps "
+                   f"per second ({f.steps_per_s / bad.steps_per_s:.3g}× {bad.run}'s)"
+                   + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + ".")
+        else:
+            fix = f"No flown run of this loop meets {t.requirement}: see the fix table."
+        out.append(Decision(robot, verdict, "Severity: " + _severity(
+            rec, by_name[bad.run].spec) + ".", fix))
+    return out
