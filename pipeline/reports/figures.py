@@ -284,6 +284,51 @@ def eigenvalues(run: RunData, path: Path) -> None:
     _save(fig, path)
 
 
+def mode_margins(run: RunData, path: Path) -> None:
+    """The fastest damping mode's loop as flown (eq. 35), L(z) = g z^−d/(z − 1) on the unit
+    circle (a Nyquist plot, left) with its gain and phase margins marked against −1, and the
+    closed-loop roots of every mode's loop in the z-plane (right)."""
+    from pipeline.analysis.margins import characteristic
+
+    th = run.record.theory
+    fast = th.modes[0]
+    g, d, m = fast.loop_gain, th.delay_steps, fast.margins
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 5), layout="constrained")
+    w = np.linspace(1e-3, np.pi, 2000)
+    z = np.exp(1j * w)
+    L = g * z ** (-d) / (z - 1.0)
+    t = np.linspace(0, 2 * np.pi, 400)
+    for ax in (a1, a2):
+        ax.plot(np.cos(t), np.sin(t), "-", lw=0.6, color="0.5")
+    a1.plot(L.real, L.imag, "-", color="tab:blue", label="L(e^jω), 0 < ω ≤ π")
+    a1.plot(L.real, -L.imag, ":", color="tab:blue", lw=0.8)
+    a1.plot([-1], [0], "k+", ms=12, mew=2, label="−1")
+    L180 = g * np.exp(-1j * d * m.phase_crossover) / (np.exp(1j * m.phase_crossover) - 1.0)
+    a1.plot(L180.real, L180.imag, "o", color="tab:red",
+            label=f"phase crossover: GM {m.gain_margin_db:.3g} dB")
+    if m.gain_crossover is not None:
+        zc = np.exp(1j * m.gain_crossover)
+        Lc = g * zc ** (-d) / (zc - 1.0)
+        a1.plot(Lc.real, Lc.imag, "s", color="tab:green",
+                label=f"gain crossover: PM {m.phase_margin_deg:.3g}°")
+    lim = max(2.0, 1.2 * abs(L180.real))
+    a1.set(xlim=(-lim, 1.0), ylim=(-lim, lim), aspect="equal", xlabel=f"Re L ({DIMLESS})",
+           ylabel=f"Im L ({DIMLESS})",
+           title=label(f"{fast.symbol} loop as flown ({flown_words(th)}), g = {g:.3g}"))
+    a1.legend(loc="lower left", fontsize=LEGEND_MIN_PT)
+    for i, mode in enumerate(th.modes):
+        roots = np.roots(characteristic(mode.loop_gain, d))
+        a2.plot(roots.real, roots.imag, "x" if i else "*", ms=12 if i == 0 else 6,
+                color="tab:red" if i == 0 else "0.35",
+                label=f"{mode.symbol} (fastest), |z| {mode.modulus:.3g}" if i == 0 else
+                ("the other modes" if i == 1 else None))
+    rmax = max(1.2, 1.1 * max(mode.modulus for mode in th.modes))
+    a2.set(xlim=(-rmax, rmax), ylim=(-rmax, rmax), aspect="equal", xlabel=f"Re z ({DIMLESS})",
+           ylabel=f"Im z ({DIMLESS})", title=label("Roots of each mode's loop as flown"))
+    a2.legend(loc="lower left", fontsize=LEGEND_MIN_PT)
+    _save(fig, path)
+
+
 def gamma_ramp(runs: list[RunData], path: Path,
                styles: dict[str, RunStyle] | None = None) -> None:
     """The γ ramp of the spec's conditioning knobs with the logged (s_min_G, γ) of each run

@@ -146,8 +146,15 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
     for r in [*runs, *diverged]:
         jobs.append((fg.Figure(
             f"figures/eig_{r.folder}.png", f"Discrete-map eigenvalues, {r.name}",
-            f"Eigenvalues of the 18×18 map Φ at step {r.record.theory.step} of {r.name}, "
-            f"explicit and imex, against the unit circle."), partial(fg.eigenvalues, r)))
+            f"Eigenvalues of the map of the loop as flown (eq. 34: its plant and delay) at "
+            f"step {r.record.theory.step} of {r.name}, explicit and imex, against the unit "
+            f"circle."), partial(fg.eigenvalues, r)))
+    for r in runs:
+        jobs.append((fg.Figure(
+            f"figures/margins_{r.folder}.png", f"Margins of the fastest mode, {r.name}",
+            "The fastest damping mode's loop as flown, L(z) = g z^−d/(z − 1), on the unit "
+            "circle (a Nyquist plot) with its gain and phase margins against −1 (eq. 35), and "
+            "the z-plane roots of every mode's loop."), partial(fg.mode_margins, r)))
     for r in runs:
         against = fg.against_log(r)
         if against is None:
