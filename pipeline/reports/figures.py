@@ -167,37 +167,47 @@ def _cols(run: RunData, cols: list[str]) -> dict[str, np.ndarray]:
     return run.log.columns(cols)
 
 
+def _rings(r: RunData) -> bool:
+    """Whether a run's record says some damping mode rings in its data (eq. 36)."""
+    p = getattr(r.record, "prediction", None)
+    return bool(p is not None and any(j.measured.rings for j in p.modes))
+
+
 def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = None) -> None:
-    """‖ω_b‖ over the mission, all runs on a log scale (top); below, one row per run (small
-    multiples, so no run hides another): the bus yaw rate ω_b,z and the camera roll rate over
-    the last second, on scales shared by column so amplitudes compare, each panel titled with
-    its peak-to-peak amplitude."""
+    """‖ω_b‖ over the mission on a log scale, for the runs in which a mode rings (top; all
+    runs when none does); below, one row per run (small multiples, so no run hides another):
+    the bus yaw rate ω_b,z and the camera roll rate over the last second of each run, against
+    the time before its end (missions of different lengths line up), on scales shared by
+    column so amplitudes compare, each panel titled with its peak-to-peak amplitude."""
     styles = _styles(runs, styles)
     n = len(runs)
     fig = plt.figure(figsize=(10, 3.4 + 1.2 * n), layout="constrained")
     upper, lower = fig.subfigures(2, 1, height_ratios=[3.4, 1.2 * n])
     top = upper.subplots()
     cols = [_cols(r, ["t", "v_breve"]) for r in runs]
-    for j, (r, c) in enumerate(zip(runs, cols, strict=True)):
+    ringing = [i for i, r in enumerate(runs) if _rings(r)] or list(range(n))
+    for j, i in enumerate(ringing):
+        r, c = runs[i], cols[i]
         w = np.linalg.norm(c["v_breve"][:, 0:3], axis=1)
         top.semilogy(c["t"], np.where(w > 0, w, np.nan), label=label(r.name),
-                     **_line_kw(styles[r.name], j, n, len(w)))
-    top.set(title="bus angular rate ‖ω_b‖ (log scale)", xlabel="t (s)", ylabel="‖ω_b‖ (rad/s)")
+                     **_line_kw(styles[r.name], j, len(ringing), len(w)))
+    top.set(title="bus angular rate ‖ω_b‖ (log scale) of the runs in which a mode rings",
+            xlabel="t (s)", ylabel="‖ω_b‖ (rad/s)")
     _legend_right(top)
     axes = lower.subplots(n, 2, sharex=True, sharey="col", squeeze=False)
-    lower.suptitle("the last second, one row per run: bus yaw rate ω_b,z = v̆[2] (left) and "
-                   "camera roll rate ω_e,z = v̆[8] (right)", fontsize=9)
+    lower.suptitle("the last second of each run, one row per run: bus yaw rate ω_b,z = v̆[2] "
+                   "(left) and camera roll rate ω_e,z = v̆[8] (right)", fontsize=9)
     for i, (r, c) in enumerate(zip(runs, cols, strict=True)):
         last = c["t"] >= c["t"][-1] - 1.0
         st = styles[r.name]
         for k, (idx, what) in enumerate(((2, "ω_b,z"), (8, "ω_e,z"))):
             ax, y = axes[i, k], c["v_breve"][last, idx]
-            ax.plot(c["t"][last], y, color=st.color, lw=0.8, marker=".", ms=2.5)
+            ax.plot(c["t"][last] - c["t"][-1], y, color=st.color, lw=0.8, marker=".", ms=2.5)
             ax.set_title(label(f"{r.name}: {what}, peak-to-peak {np.ptp(y):.2g} rad/s"),
                          fontsize=8, loc="left", color=st.color)
             ax.set_ylabel(f"{what} (rad/s)")
-        axes[i, 0].set_xlabel("t (s)" if i == n - 1 else "")
-        axes[i, 1].set_xlabel("t (s)" if i == n - 1 else "")
+        for ax in axes[i]:
+            ax.set_xlabel("time before the end (s)" if i == n - 1 else "")
     _save(fig, path)
 
 
@@ -517,31 +527,36 @@ def inertia_map(table: Path, path: Path) -> str | None:
     return None
 
 
+def _short(name: str) -> str:
+    """A run's name without the shipped missions' common prefix, for a label on a point."""
+    return name.removeprefix("omega_ripple_")
+
+
 def stability_region(runs: list[RunData], tables: list[Path], path: Path,
                      styles: dict[str, RunStyle] | None = None) -> None:
-    """Left: the (dt, μ) plane of one damping mode under forward Euler (eqs. 23, 24), with
-    the bound dt·μ = 2 and the margin dt·μ = 1 (the bound under one step of delay), each run's
-    fastest mode and every sweep point (μ_max at its dt), marked by its measured dominant
-    lag-1; runs at one point share a mark. Right: the locus of the eigenvalues of each
-    explicit run's map as flown (eq. 34: its plant and delay) as dt varies, against the unit
-    circle."""
+    """Left: the (dt, μ) plane of one damping mode (eqs. 23, 24, 35), unstable above dt·μ = 2
+    without delay and above dt·μ = 1 with one step of it; each run's fastest mode, marked by
+    its loop (explicit, explicit with one step of delay, imex) and labelled by name (runs at
+    one point share a label), and every sweep point (μ_max at its dt) by its measured lag-1.
+    Right: the eigenvalues of the map as flown (eq. 34) as dt varies, one locus per robot and
+    loop (its explicit run of the largest step), against the unit circle; at most eight key
+    entries a panel."""
     from pipeline.sim.stability import flown_map
 
     st = _styles(runs, styles)
-    fig, ax = plt.subplot_mosaic([["region", "locus"], ["key1", "key1"], ["key2", "key2"]],
-                                 figsize=(12, 8.0), height_ratios=[3, 1.3, 0.5],
-                                 layout="constrained")
-    a1, a2 = ax["region"], ax["locus"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(13, 6.2), layout="constrained",
+                                 width_ratios=[1.15, 1])
     dts = np.geomspace(1e-3, 0.1, 200)
     mus = np.array([1e-2, 1e4])
     a1.fill_between(dts, 2 / dts, mus[1], color="tab:red", alpha=0.12,
-                    label="dt·μ > 2: period-2 unstable")
+                    label="dt·μ > 2: unstable (no delay)")
     a1.fill_between(dts, 1 / dts, 2 / dts, color="tab:orange", alpha=0.12,
-                    label="1 < dt·μ < 2: stable, rings; unstable with one step of delay")
+                    label="1 < dt·μ < 2: rings; unstable with one step of delay")
     a1.fill_between(dts, mus[0], 1 / dts, color="tab:green", alpha=0.10,
-                    label="dt·μ ≤ 1: the margin")
-    a1.plot(dts, 2 / dts, "r-", lw=1.0, label="dt·μ = 2 (forward Euler)")
-    a1.plot(dts, 1 / dts, "k--", lw=0.9, label="dt·μ = 1 (one step of delay)")
+                    label="dt·μ ≤ 1: stable with one step of delay")
+    a1.plot(dts, 2 / dts, "r-", lw=1.0)
+    a1.plot(dts, 1 / dts, "k--", lw=0.9)
+    ring_pts, calm_pts = [], []
     for table in tables:
         df = pd.read_parquet(table)
         need = ["dt_mu_max", "mu_max", "dominant_lag1"]
@@ -549,36 +564,48 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
             continue
         df = df[df["status"] == "complete"].dropna(subset=need)
         dt_pt = df["dt_mu_max"] / df["mu_max"]
-        ring = df["dominant_lag1"] < 0
-        a1.plot(dt_pt[ring], df["mu_max"][ring], "s", ms=4, mfc="none", color="tab:red")
-        a1.plot(dt_pt[~ring], df["mu_max"][~ring], "o", ms=4, mfc="none", color="tab:green")
-    a1.plot([], [], "s", ms=4, mfc="none", color="tab:red", label="sweep point, lag-1 < 0")
-    a1.plot([], [], "o", ms=4, mfc="none", color="tab:green", label="sweep point, lag-1 ≥ 0")
-    t = np.linspace(0, 2 * np.pi, 400)
-    a2.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
-    locus_dts = np.geomspace(0.002, 0.05, 60)
-    # Runs whose fastest mode sits at one point of the plane (same dt, μ, integrator and
-    # delay) share one mark and one key entry.
+        ring = (df["dominant_lag1"] < 0).to_numpy()
+        ring_pts.append((dt_pt[ring], df["mu_max"][ring]))
+        calm_pts.append((dt_pt[~ring], df["mu_max"][~ring]))
+    for pts, mk, col, text in ((ring_pts, "s", "tab:red", "sweep point, lag-1 < 0"),
+                               (calm_pts, "o", "tab:green", "sweep point, lag-1 ≥ 0")):
+        for i, (x, y) in enumerate(pts):
+            a1.plot(x, y, mk, ms=4, mfc="none", color=col, label=text if i == 0 else None)
+    # Runs whose fastest mode sits at one point of the plane share a mark and a label.
     groups: dict[tuple, list[RunData]] = {}
     for r in runs:
         th = r.record.theory
         key = (th.dt, round(th.fastest_mode.mu, 6), th.integrator, th.delay_steps)
         groups.setdefault(key, []).append(r)
-    for (dt, mu, integ, delay), members in groups.items():
-        th = members[0].record.theory
-        mk = ("*" if integ == "explicit" else "P") if not delay else "D"
-        late = f", delay {delay}: bound dt·μ = 1" if delay else ""
-        a1.plot(dt, mu, mk, ms=11, color=st[members[0].name].color,
-                label=f"{', '.join(m.name for m in members)}: {th.fastest_mode.name} "
-                      f"({integ}{late})")
-    seen: set[tuple] = set()
+    kinds = {("explicit", False): ("*", "explicit, no delay"),
+             ("explicit", True): ("D", "explicit, one step of delay"),
+             ("imex", False): ("P", "imex"), ("imex", True): ("P", "imex")}
+    keyed: set[str] = set()
+    # Labels of points on one row (one μ, the seed's bus yaw at many steps) are staggered up
+    # and down, so that neighbours do not print over each other.
+    row: dict[float, int] = {}
+    for (dt, mu, integ, delay), members in sorted(groups.items()):
+        mk, kind = kinds[(integ, bool(delay))]
+        a1.plot(dt, mu, mk, ms=10, color="0.2", mfc="none" if integ == "imex" else "0.2",
+                label=None if kind in keyed else kind)
+        keyed.add(kind)
+        i = row[mu] = row.get(mu, -1) + 1
+        a1.annotate(", ".join(_short(m.name) for m in members), (dt, mu), fontsize=7,
+                    xytext=(4, (8 + 10 * (i // 2)) * (1 if i % 2 == 0 else -1.6)),
+                    textcoords="offset points", rotation=20)
+    t = np.linspace(0, 2 * np.pi, 400)
+    a2.plot(np.cos(t), np.sin(t), "k-", lw=0.8)
+    locus_dts = np.geomspace(0.002, 0.05, 60)
+    loops: dict[tuple, RunData] = {}
     for r in runs:
         th = r.record.theory
-        s = st[r.name]
-        key = (th.plant, th.delay_steps, tuple(np.asarray(th.M_breve).ravel().round(12)))
-        if th.integrator != "explicit" or key in seen:
+        if th.integrator != "explicit":
             continue
-        seen.add(key)
+        key = (str(r.spec.get("robot", {}).get("file", "?")), th.plant, th.delay_steps)
+        if key not in loops or th.dt > loops[key].record.theory.dt:
+            loops[key] = r
+    for r in loops.values():
+        th = r.record.theory
         M, D, K_x, J_x = (np.asarray(m) for m in (th.M_breve, th.D_breve, th.K_x, th.J_x))
         ev = np.array([np.linalg.eigvals(flown_map(M, D, K_x, J_x, dt, "explicit", th.plant,
                                                    th.delay_steps)) for dt in locus_dts])
@@ -586,23 +613,20 @@ def stability_region(runs: list[RunData], tables: list[Path], path: Path,
                    cmap="viridis", norm=matplotlib.colors.LogNorm())
         here = np.linalg.eigvals(flown_map(M, D, K_x, J_x, th.dt, "explicit", th.plant,
                                            th.delay_steps))
-        a2.plot(here.real, here.imag, "x", ms=8, color=s.color,
-                label=f"{r.name} at dt = {th.dt:g} s ({flown_words(th)})")
+        a2.plot(here.real, here.imag, "x", ms=8, color=st[r.name].color,
+                label=f"{r.name} ({flown_words(th)}, dt = {th.dt:g} s)")
     a1.set(xscale="log", yscale="log", xlim=(dts[0], dts[-1]), ylim=(10.0, 1e3),
            xlabel="dt (s)", ylabel="μ of the mode (1/s)",
-           title=label("Stability of one damping mode under forward Euler"))
+           title=label("Stability of one damping mode, each run's fastest"))
+    a1.legend(loc="lower left", fontsize=LEGEND_MIN_PT)
     sm = plt.cm.ScalarMappable(cmap="viridis", norm=matplotlib.colors.LogNorm(
         locus_dts[0], locus_dts[-1]))
     fig.colorbar(sm, ax=a2, label="dt (s)")
-    a2.set(xlim=(-4, 1.5), ylim=(-1.6, 1.6), xlabel=f"Re λ ({DIMLESS})",
+    a2.set(xlim=(-4, 1.5), ylim=(-2.2, 2.2), xlabel=f"Re λ ({DIMLESS})",
            ylabel=f"Im λ ({DIMLESS})",
            title=label("Eigenvalues of Φ as flown (explicit) as dt varies"))
     a2.set_aspect("equal", adjustable="box")
-    # The keys in panels of their own below the plots, which they would otherwise cover.
-    for key, src, ncol in ((ax["key1"], a1, 2), (ax["key2"], a2, 3)):
-        key.axis("off")
-        key.legend(*src.get_legend_handles_labels(), loc="upper left", ncol=ncol,
-                   fontsize=LEGEND_MIN_PT, frameon=False)
+    a2.legend(loc="lower left", fontsize=LEGEND_MIN_PT)
     _save(fig, path)
 
 

@@ -100,9 +100,11 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
                        + ", ".join(r.name for r in runs if r.log is None))
     global_figs = [
         (fg.Figure("figures/rates.png", "Bus angular rate and camera roll rate",
-                   "‖ω_b‖ over the mission (top), the bus yaw rate v̆[2] and the camera roll "
-                   "rate v̆[8] over the last second, per run: on the seed robot the period-2 "
-                   "ripple is in ω_b (the bus yaw), on the servicer in the camera roll."),
+                   "‖ω_b‖ over the mission of the runs in which a mode rings (top), the bus "
+                   "yaw rate v̆[2] and the camera roll rate v̆[8] over each run's last second, "
+                   "per run: on the seed robot the period-2 ripple is in ω_b (the bus yaw), "
+                   "on the servicer in the camera roll; with one step of delay both ring over "
+                   "six steps."),
          partial(fg.rates, logged, styles=styles), logged),
         (fg.Figure("figures/lag1.png", "Lag-1 per direction",
                    "Lag-1 autocorrelation of each singular direction of Γ (★ the dominant one): "
@@ -123,13 +125,14 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
     ]
     global_figs.append((fg.Figure(
         "figures/stability_region.png", "Stability region and the eigenvalue locus",
-        "Left: the (dt, μ) plane of one damping mode under forward Euler: unstable above "
-        "dt·μ = 2, ringing between 1 and 2, and dt·μ ≤ 1 the margin (the bound itself under "
-        "one step of computation delay); each run's fastest mode (★ explicit, ✚ imex) and "
+        "Left: the (dt, μ) plane of one damping mode: unstable above dt·μ = 2 without delay "
+        "and above dt·μ = 1 with one step of it; each run's fastest mode, marked by its loop "
+        "(★ explicit, ◆ explicit with one step of delay, ✚ imex) and labelled by name, and "
         "every sweep point (μ_max at its dt, red squares where its measured lag-1 is "
-        "negative). Right: Φ's eigenvalues for each explicit run's linearisation as dt "
-        "varies (colour), its own dt marked ×: the dominant one leaves the unit circle at "
-        "−1."), partial(fg.stability_region, runs,
+        "negative). Right: the eigenvalues of the map as flown (eq. 34) as dt varies "
+        "(colour), one locus per robot and loop, its own dt marked ×: without delay the "
+        "dominant one leaves the unit circle at −1, with one step of it as a complex pair."),
+        partial(fg.stability_region, runs,
                         sorted(Path(out).glob("sweeps/*/sweep.parquet")), styles=styles),
         runs))
     jobs += [(fig, draw) for fig, draw, inputs in global_figs if inputs]
