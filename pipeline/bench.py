@@ -83,7 +83,7 @@ def analysis_once(robot: GiordanoRobot, path: Path) -> float:
     log = ArtefactStore().open_log(path)  # verified before the clock starts
     n = log.rows
     t0 = time.perf_counter()
-    _, y, _ = rebuild_and_project(robot, log, Window(n // 2, n, "bench"))
+    _, y, _, _ = rebuild_and_project(robot, log, Window(n // 2, n, "bench"))
     signals.lag1_autocorrelation(y)
     signals.step_rms(y)
     return (time.perf_counter() - t0) / n * 1e6
