@@ -128,7 +128,9 @@ def _loop_of_record(tables: list[FixTable], runs: dict[str, RunData]) -> FixTabl
     return max(tables, key=rank)
 
 
-def _severity(rec: CompleteRecord, spec: dict) -> str:
+def severity(rec: CompleteRecord, spec: dict) -> str:
+    """What the ripple harms in mission units (eqs. 30–32): torque reversals, attitude
+    jitter, the camera roll's smear."""
     h, c = rec.harm, rec.camera_roll
     limit = float(spec.get("mission", {}).get("plant", {}).get("bus_torque_max", 0.0) or 0.0)
     against = (f"against its {limit:g} N·m limit" if limit > 0 else
@@ -198,6 +200,6 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                    + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + ".")
         else:
             fix = f"No flown run of this loop meets {t.requirement}: see the fix table."
-        out.append(Decision(robot, verdict, "Severity: " + _severity(
+        out.append(Decision(robot, verdict, "Severity: " + severity(
             rec, by_name[bad.run].spec) + ".", fix))
     return out

@@ -12,6 +12,7 @@ import numpy as np
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
 from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
+from pipeline.reports.fixes import severity
 from pipeline.reports.templating import num
 from pipeline.sim.stability import damping_modes
 
@@ -50,6 +51,22 @@ def ringing_words(run: CompleteRecord) -> str:
         parts.append(f"the {j.mode} mode over {r.period_steps:.3g} steps "
                      f"({r.peak_to_peak:.3g} {r.unit} peak to peak{held})")
     return "; ".join(parts) or "no mode"
+
+
+def recommended(th: Theory) -> str:
+    """The cheapest change that meets the requirement on this run's loop (eq. 35; fewest
+    steps per second, then the larger gain margin), in words, or why none is named."""
+    ok = sorted((f for f in th.requirement_fixes if f.meets and f.change != "as flown"),
+                key=lambda f: (f.steps_per_s, -f.gain_margin_db))
+    if th.requirement_fixes and th.requirement_fixes[0].meets:
+        return "none needed: every mode meets the requirement as flown"
+    if not ok:
+        return "no single change of the step, the integrator or the damping gains meets it"
+    f = ok[0]
+    pm = "" if f.phase_margin_deg is None else f", {f.phase_margin_deg:.3g}°"
+    return (f"{f.change} (least margins {f.gain_margin_db:.3g} dB{pm}, "
+            f"{1e3 * f.delay_margin_s:.3g} ms, {f.worst_mode}; {f.steps_per_s:.4g} steps per "
+            f"second)")
 
 
 def verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
@@ -159,6 +176,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "lag1_smooth": LAG1_SMOOTH, "ringing": ringing_words(rec),
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
         "modes": th.modes, "prediction": rec.prediction, "requirement": th.requirement,
+        "severity": severity(rec, run.spec), "recommended": recommended(th),
         "plant_words": th.update_order,
         "note_rows": table, "note_labels": names, "note_differences": differences(table),
         "fmt": fmt, "versions": versions,
