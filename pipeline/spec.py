@@ -190,6 +190,14 @@ class Mission(_Block):
     duration: Positive = 60.0
     plant: Plant = Plant()
 
+    @model_validator(mode="after")
+    def _at_least_one_step(self) -> Mission:
+        # round(duration/dt) steps run: none would write an empty log marked complete.
+        if round(self.duration / self.dt) < 1:
+            raise ValueError(f"duration {self.duration:g} s is shorter than one step of "
+                             f"dt {self.dt:g} s: the mission would run no step")
+        return self
+
 
 class Requirements(_Block):
     """The stability margins a review asks of every damping mode of the loop as flown

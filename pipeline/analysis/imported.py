@@ -73,7 +73,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
     if controller is not None:
         check_controller(log, controller)
     n, dt = log.rows, log.spec.mission.dt
-    win = choose_window(n, dt, window_start)
+    win = choose_window(n, dt, window_start, str(log.path))
     robot = GiordanoRobot(log.spec)
     prov, directions, dominant, nu_breve = direction_stages(robot, log, win)
     cols = log.columns(["v", "s_min_G", "s_min_J", "kappa_G"], win.start, win.stop)

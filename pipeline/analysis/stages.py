@@ -45,13 +45,20 @@ class Window:
     rule: str
 
 
-def choose_window(n: int, dt: float, window_start: float | None) -> Window:
+MIN_WINDOW = 3  # steps: a lag-1 (eq. 25) and a second difference need three
+
+
+def choose_window(n: int, dt: float, window_start: float | None, source: str = "log"
+                  ) -> Window:
     if window_start is None:
+        if n - n // 2 < MIN_WINDOW:
+            raise LogError(f"{source}: {n} steps: the analysis window (its second half) holds "
+                           f"{n - n // 2}, fewer than the {MIN_WINDOW} its statistics need")
         return Window(n // 2, n, "second half of the mission (after start-up transients)")
     if not np.isfinite(window_start):
         raise SpecError(f"--window-start {window_start}: not a finite number of seconds")
     start = round(window_start / dt)
-    if window_start < 0 or n - start < 3:
+    if window_start < 0 or n - start < MIN_WINDOW:
         raise LogError(f"window start {window_start} s leaves fewer than 3 steps of a "
                        f"{n * dt:g} s log")
     return Window(start, n, f"from {window_start:g} s to the end")
@@ -112,7 +119,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     log.require(REQUIRED)
     n = log.rows
     dt = spec.mission.dt
-    win = choose_window(n, dt, window_start)
+    win = choose_window(n, dt, window_start, str(path))
     robot = GiordanoRobot(spec)
 
     prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check)

@@ -110,7 +110,7 @@ def _default_window(record: AnalysisRecord, log: VerifiedLog) -> bool:
 
     if isinstance(record, DivergedRecord):
         return True
-    default = choose_window(log.rows, log.spec.mission.dt, None)
+    default = choose_window(log.rows, log.spec.mission.dt, None, str(log.path))
     return ((record.window.start_step, record.window.stop_step)
             == (default.start, default.stop))
 
