@@ -165,8 +165,14 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
     table = note_rows(rec, other, claims)
-    fixes = [o for o in others if o.record.integrator == "imex"
-             and o.record.dt == rec.dt and o.name != run.name]
+    # The implicit-damping runs of this robot on this loop (plant and delay) at this step.
+    def loop(r: RunData) -> tuple:
+        th_r = r.record.theory
+        return (r.spec.get("robot", {}).get("file"), th_r.plant, th_r.delay_steps)
+
+    fixes = [o for o in others if isinstance(o.record, CompleteRecord)
+             and o.record.integrator == "imex" and o.record.dt == rec.dt
+             and o.name != run.name and loop(o) == loop(run)]
     return {
         "run": run, "rec": rec, "other": other, "comp": comp, "th": th, "names": names,
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
