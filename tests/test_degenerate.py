@@ -37,3 +37,11 @@ def test_a_log_too_short_for_its_window_is_refused_in_one_line_naming_it(tmp_pat
 def test_a_series_too_short_still_or_not_finite_rings_undetermined(series):
     r = ring(series, "x", "1")
     assert r.rings is None and r.peak_to_peak is None and r.period_steps is None
+
+
+def test_the_line_share_never_exceeds_one_at_the_bands_edge():
+    """A tone just past the band's edge (period 21 steps): the line's bins outside the band
+    were counted against the band's power (a share of 1856 was read)."""
+    k = np.arange(1000, dtype=float)
+    r = ring(np.sin(2 * np.pi * k / 21), "x", "1")
+    assert 0.0 <= r.line_share <= 1.0 and not r.rings

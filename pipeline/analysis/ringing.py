@@ -72,7 +72,10 @@ def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
     band = f >= 1.0 / BAND_STEPS
     band_power = float(P[band].sum())
     peak = int(np.flatnonzero(band)[np.argmax(P[band])])
-    line = float(P[max(0, peak - LINE_BINS):peak + LINE_BINS + 1].sum())
+    # The line's bins within the band only, so that its share never exceeds one.
+    near = np.zeros_like(band)
+    near[max(0, peak - LINE_BINS):peak + LINE_BINS + 1] = True
+    line = float(P[near & band].sum())
     part = short_period_part(x)
     band_share = band_power / total
     line_share = line / band_power if band_power > 0 else 0.0
