@@ -90,6 +90,53 @@ def test_margins_against_python_control(mode, dt, delay, integrator):
     assert radius_at(0.99 * m.delay_margin_s) < 1.0 < radius_at(1.01 * m.delay_margin_s)
 
 
+@pytest.mark.parametrize("delay", [2, 3])
+@pytest.mark.parametrize("g", [0.2, 0.5, 1.0, 1.9])
+def test_longer_delays_against_python_control(g, delay):
+    """Two and three steps of delay (several phase crossovers): the gain margin is the first
+    crossover's, where the closed loop at g·GM has python-control's poles on the unit circle
+    and inside at 0.99·GM; the phase margin equals python-control's modulo a turn (it wraps
+    into (−180°, 180°], which reads +91° for the unstable d = 2, g = 1.9; eq. 35 does not),
+    and it is negative exactly when the closed loop is unstable."""
+    m = mg.margins(g, delay, 1.0, REQ)
+    L = _loop(g, delay, 1.0)
+    gm_factor = 10 ** (m.gain_margin_db / 20)
+    assert _closed_loop_radius(L, gm_factor) == pytest.approx(1.0, abs=1e-9)
+    assert _closed_loop_radius(L, 0.99 * gm_factor) < 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        _, pm, _, _, wgc, _ = control.stability_margins(L)
+    assert (m.phase_margin_deg - pm + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-7)
+    assert wgc == pytest.approx(m.gain_crossover, rel=1e-9)
+    assert (m.phase_margin_deg > 0) == (_closed_loop_radius(L) < 1.0)
+
+
+@pytest.mark.parametrize("g, delay", [(1.28, 0), (0.5, 0), (0.3, 1), (0.8, 1), (0.15, 2)])
+def test_the_delay_margin_in_continuous_time(g, delay):
+    """The delay margin against a simulation in continuous time, not eq. 35's difference
+    equation: ė(t) = −(g/dt) e(t_k) over [t_k + τ_total, t_{k+1} + τ_total), the sampled
+    error held and applied τ_total = (d + τ/dt) steps late, integrated on a grid of dt/400
+    (exact for a piecewise-constant input on its grid). The error grows over 400 steps at
+    1.02 × DM and decays at 0.98 × DM."""
+    fine = 400
+    dm = mg.margins(g, delay, 1.0, REQ).delay_margin_s  # dt = 1: in steps
+
+    def growth(total: float, steps: int = 400) -> float:
+        shift = round(total * fine)  # the delay on the grid
+        e = np.empty(steps * fine + 1)
+        e[0] = 1.0
+        held = np.zeros(steps + 1)
+        for i in range(steps * fine):
+            if i % fine == 0:
+                held[i // fine] = e[i]
+            j = (i - shift) // fine  # the sample whose hold covers this grid interval
+            u = -g * held[j] if i - shift >= 0 else 0.0
+            e[i + 1] = e[i] + u / fine
+        return float(np.abs(e[-50 * fine:]).max() / np.abs(e[-200 * fine:-150 * fine]).max())
+
+    assert growth(delay + 0.98 * dm) < 1.0 < growth(delay + 1.02 * dm)
+
+
 def test_the_seeds_margins_in_numbers():
     """The issue's figures: the bus yaw at dt 0.03 s fails by −5.67 dB; at 0.01 s it passes
     the phase (50.2°) but not the gain (3.88 dB) or the delay margin (7.81 ms, dt/g exactly);
@@ -122,6 +169,66 @@ def test_ring_reads_a_held_six_step_cycle_and_refuses_to_judge_short_or_still_se
     assert short.rings is None and short.period_steps is None
     still = ring(np.full(1000, 0.2), "x", "rad/s")
     assert still.rings is None
+
+
+def test_ring_sees_a_ring_under_a_slew_and_not_a_decaying_transient_or_noise():
+    """Synthetic series with known answers (eq. 36): a 10⁻³ period-2 ring under a unit slew
+    of 500 steps rings (the share is of the fast motion, not of the slew) and is steady;
+    a stable lightly damped mode's ring (×0.99 and ×0.999 per step) reads decaying;
+    a growing one grows; white noise, and a smooth reference, do not ring."""
+    k = np.arange(2000, dtype=float)
+    alt = np.cos(np.pi * k)
+    under = ring(np.sin(2 * np.pi * k / 500) + 1e-3 * alt, "x", "rad/s")
+    assert under.rings and under.trend == "steady"
+    assert under.period_steps == 2.0 and under.peak_to_peak == pytest.approx(2e-3, rel=1e-3)
+    for r in (0.99, 0.999):
+        fading = ring(r ** k * alt, "x", "rad/s")
+        assert fading.trend == "decaying"
+    growing = ring(1.001 ** k * alt, "x", "rad/s")
+    assert growing.rings and growing.trend == "growing"
+    noise = ring(np.random.default_rng(7).standard_normal(2000), "x", "rad/s")
+    assert noise.rings is False
+    smooth = ring(np.sin(2 * np.pi * k / 700) + 0.3 * np.cos(2 * np.pi * k / 300), "x", "rad/s")
+    assert smooth.rings is False
+
+
+def test_a_limit_is_named_only_for_the_cycle_it_holds():
+    """The relay's cycle without delay: the bus rate alternating by dt·a_max each step (at the
+    bound on every step). Measured as that cycle, it is held by the bound (explains); the same
+    bound beside a ring of another size, or of six steps, is reported but does not explain
+    it."""
+    from pipeline.analysis.ringing import Ring
+    from pipeline.analysis.verdict import held_by
+
+    dt, a_max, n = 0.03, 10.0, 600
+    block = np.zeros((n, 3))
+    block[:, 2] = 0.5 * dt * a_max * np.cos(np.pi * np.arange(n))
+    measured = ring(block[:, 2], "ω_b,z", "rad/s")
+    h = held_by(block, 0, dt, ("omega_b", a_max, 100.0), measured)
+    assert h.limit == "omega_b_acc" and h.at_bound_share == 1.0 and h.explains
+    assert h.size_estimate == pytest.approx(dt * a_max) and h.period_estimate == 2.0
+    for other in (Ring("ω_b,z", "rad/s", 2.0 * dt * a_max, 2.0, 1.0, 1.0, 1.0, True),
+                  Ring("ω_b,z", "rad/s", dt * a_max, 6.0, 1.0, 1.0, 1.0, True)):
+        assert not held_by(block, 0, dt, ("omega_b", a_max, 100.0), other).explains
+
+
+def test_the_modes_and_the_map_must_agree_on_stability(delayed):
+    """A record whose modes call the loop unstable while its map (eq. 34) is stable, or the
+    reverse, agrees with no data: the modes cannot say which must ring."""
+    from pipeline.analysis.verdict import judge
+
+    rec = delayed["short_omega_ripple_sampled_delay"]
+    th = rec.theory
+    assert any(m.rings for m in th.modes) and rec.prediction.theory_consistent
+    log = verify_log(rec.log)
+    eta = np.zeros((400, 9))
+    eta[:, 2] = 0.1 * np.cos(np.pi * np.arange(400))
+    M = np.asarray(th.M_breve)
+    for radius in (0.5, 1.5):
+        p = judge(th.modes, M, eta, th.dt, th.delay_steps, log.spec.controller.limits, radius)
+        assert p.theory_consistent is (radius >= 1.0)
+        if radius < 1.0:
+            assert p.agrees is False
 
 
 def test_a_reduced_plant_is_refused_a_field_only_the_sampled_plant_reads():

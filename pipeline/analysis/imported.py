@@ -83,7 +83,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
         damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
         prediction = judge(damping.modes, np.asarray(damping.M_breve), nu_breve, dt,
-                           damping.delay_steps, controller.controller.limits)
+                           damping.delay_steps, controller.controller.limits, None)
     imp = log.meta.imported
     return rs.ImportedRecord(
         spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,

@@ -128,7 +128,10 @@ def gain_margin(g: float, delay: int) -> tuple[float, float]:
 
 
 def phase_margin(g: float, delay: int) -> tuple[float | None, float | None]:
-    """(PM in rad, ω_c), or (None, None) when |L| > 1 at every frequency (g > 2)."""
+    """(PM in rad, ω_c), or (None, None) when |L| > 1 at every frequency (g > 2). Not wrapped
+    into (−π, π]: with d ≥ 2 the crossover's phase can lie more than a turn past −π, and the
+    wrapped value (python-control's) then reads positive for an unstable loop (d = 2, g = 1.9:
+    +91° wrapped, −269° here, GM −9.75 dB)."""
     if g > 2.0:
         return None, None
     wc = 2.0 * math.asin(g / 2.0)

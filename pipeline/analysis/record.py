@@ -37,8 +37,10 @@ from pipeline.errors import LogError
 # /2: sim_version and analysis_version (was code_version); /3: theory.fastest_mode (every damping
 # mode's fastest, named, with its fixes) and bus_rate.at_bound_share, which the reports read;
 # /4: harm (the actuators' torque reversals and the bus attitude jitter, eqs. 30–32) and
-# modes_along (the fastest damping mode named along the whole log, eq. 21).
-SCHEMA = "breve-analysis/5"
+# modes_along (the fastest damping mode named along the whole log, eq. 21); /6: a ring's growth
+# (sustained or decaying), a held cycle checked against its estimate (HeldBy.explains) and the
+# modes' stability checked against the map's (Prediction.theory_consistent).
+SCHEMA = "breve-analysis/6"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
 

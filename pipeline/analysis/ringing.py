@@ -8,12 +8,23 @@ coordinates over hundreds of steps. The short-period band is the periods of at m
 ``BAND_STEPS`` = 20 steps, between the two with a factor of three either way. The series,
 less its least-squares line, is split by its discrete Fourier transform:
 
-    band share  = Σ_band P_f / Σ_{f>0} P_f            (P: periodogram under a Hann window)
+    band share  = Σ_band P_f / Σ_{f ≥ 1/60} P_f       (P: periodogram under a Hann window)
     line share  = Σ_{|f − f_peak| ≤ 3 bins} P_f / Σ_band P_f
+    growth      = rms(last third) / rms(first third)   of the band's part
     rings       ⇔  band share > ½  and  line share > ½
+    trend       growing (growth > 2), decaying (growth < ½), steady
 
-"most of the motion about its trend is at short periods, and most of that is one spectral line"
-(white noise fills the band but no line; a smooth reference leaves the band empty). The peak's
+"most of the fast motion about its trend is at short periods, and most of that is one spectral
+line" (white noise fills the band but no line; a smooth reference leaves the band empty, its
+power falling with frequency); the trend says whether it lasts (a stable lightly damped mode's
+ring fades over the window: :func:`pipeline.analysis.verdict.judge` counts a decaying ring of
+a mode called stable as its transient). The share is of the motion at periods of at most
+``REFERENCE_STEPS`` = 60 (three times the band's longest), not of all of it: a slow manoeuvre
+of any size leaves it unchanged (a Hann window's leakage from hundreds of steps to 60 is
+below 1e−9 of its power),
+so a ring under a large slew is still seen. "Decaying" is the last third of the window's band
+part less than half the size of its first third: a root of modulus r fades by r^(N/3), so on a
+window of N steps a mode decaying faster than 2^(−3/N) per step reads as decaying. The peak's
 period is 1/f_peak, f_peak refined by a parabola through the log periodogram at the peak and
 its neighbours (period 2 exactly at the Nyquist bin); the size is the peak-to-peak of the band's
 part of the series (:func:`short_period_part`). A series shorter than
@@ -31,8 +42,11 @@ BAND_STEPS = 20  # the longest period of the short-period band, in steps
 LINE_BINS = 3  # the spectral line's half-width, in bins (a Hann window spreads a tone over 3)
 MOST = 0.5
 TRIM = 4 * BAND_STEPS  # the high pass's start-up transient, trimmed at either end
+REFERENCE_STEPS = 3 * BAND_STEPS  # the fast motion the band's share is of
 MIN_STEPS = 10 * BAND_STEPS
 RESOLUTION_ULPS = 64
+SUSTAINED = 0.5  # the last third's size against the first's: below, decaying
+GROWING = 2.0  # above: the data grow over the window
 
 
 @dataclass(frozen=True)
@@ -46,11 +60,20 @@ class Ring:
     period_steps: float | None
     band_share: float | None
     line_share: float | None
+    growth: float | None  # rms of the band's part, last third over first third
     rings: bool | None
+
+    @property
+    def trend(self) -> str | None:
+        """'growing', 'steady' or 'decaying' over the window, from ``growth``."""
+        if self.growth is None:
+            return None
+        return ("growing" if self.growth > GROWING else
+                "decaying" if self.growth < SUSTAINED else "steady")
 
 
 def _undetermined(coordinate: str, unit: str) -> Ring:
-    return Ring(coordinate, unit, None, None, None, None, None)
+    return Ring(coordinate, unit, None, None, None, None, None, None)
 
 
 def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
@@ -68,7 +91,7 @@ def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
         return _undetermined(coordinate, unit)
     f = np.fft.rfftfreq(n)
     P = np.abs(np.fft.rfft(detrended * np.hanning(n))) ** 2
-    total = float(P[1:].sum())
+    total = float(P[f >= 1.0 / REFERENCE_STEPS].sum())
     band = f >= 1.0 / BAND_STEPS
     band_power = float(P[band].sum())
     peak = int(np.flatnonzero(band)[np.argmax(P[band])])
@@ -77,12 +100,18 @@ def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
     near[max(0, peak - LINE_BINS):peak + LINE_BINS + 1] = True
     line = float(P[near & band].sum())
     part = short_period_part(x)
-    band_share = band_power / total
+    band_share = band_power / total if total > 0 else 0.0
     line_share = line / band_power if band_power > 0 else 0.0
+    third = part.size // 3
+    early, late = (float(np.sqrt(np.mean(p ** 2))) for p in (part[:third], part[-third:]))
+    # A band part that starts from nothing grows without bound: the largest finite float
+    # stands for it (the record is JSON, which has no infinity).
+    growth = late / early if early > 0 else (np.finfo(float).max if late > 0 else 1.0)
     return Ring(coordinate=coordinate, unit=unit,
                 peak_to_peak=float((part.max() - part.min()) * abs(scale)),
                 period_steps=_peak_period(P, f, peak), band_share=band_share,
-                line_share=line_share, rings=bool(band_share > MOST and line_share > MOST))
+                line_share=line_share, growth=float(growth),
+                rings=bool(band_share > MOST and line_share > MOST))
 
 
 def short_period_part(x: np.ndarray) -> np.ndarray:

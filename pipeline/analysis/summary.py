@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord
-from pipeline.analysis.verdict import ModeLoop, Prediction
+from pipeline.analysis.verdict import ModeLoop, Prediction, measured_words
 
 
 def _num(x: float | None) -> str:
@@ -108,25 +108,22 @@ def mode_lines(modes: list[ModeLoop], prediction: Prediction, plant: str, delay:
                f"undetermined on {prediction.undetermined}" if prediction.undetermined
                else "DISAGREE")
     lines = [f"  modes of the loop as flown ({plant} plant{late}): theory and data {verdict}"]
-    quiet = 0
+    quiet, driven = 0, {}
     for m, j in zip(modes, prediction.modes, strict=True):
         if not (m.rings or j.measured.rings or not m.margins.meets):
             quiet += 1
             continue
-        r = j.measured
-        data = ("undetermined" if r.rings is None else
-                f"rings over {r.period_steps:.3g} steps, {r.peak_to_peak:.3g} {r.unit} peak to "
-                f"peak" if r.rings else "quiet")
-        if j.driven_by is not None:
-            data += f", driven by the {j.driven_by} mode's cycle"
-        if j.held_by is not None:
-            h = j.held_by
-            data += (f", held by {h.limit} ({100 * h.at_bound_share:.0f} % of steps at it; "
-                     f"bang-bang estimate {h.size_estimate:.3g})")
+        if j.driven_by is not None and m.margins.meets:
+            driven.setdefault(j.driven_by, []).append(m.symbol)
+            continue
+        data = measured_words(j)
         period = "" if m.period_steps is None else f", period {m.period_steps:.3g} steps"
         word = "undetermined" if j.agrees is None else "agree" if j.agrees else "DISAGREE"
         lines.append(f"    {m.name}: dt·μ {m.dt_mu:.3g}, root |z| {m.modulus:.3g}{period} "
                      f"({m.regime}); data: {data}; {word}; {_margins(m)}")
+    for driver, symbols in driven.items():
+        lines.append(f"    {len(symbols)} stable modes ({', '.join(symbols)}) ring at the "
+                     f"{driver} mode's period with less modal energy: driven by it; margins met")
     if quiet:
         lines.append(f"    {quiet} other modes: stable, quiet in the data, margins met")
     return lines

@@ -12,12 +12,26 @@ a relay: its describing function puts the cycle at the loop's phase crossover, p
 2π/ω_180 = 2(2d + 1) steps (eq. 35; 2 undelayed, 6 with one step of delay, whatever the linear
 root's period), of size (P/2)·dt·a_max peak to peak; a rate bound holds 2·w_max.
 
+The relay's estimate is a first harmonic's: the cycle is held by the limit, as the record says,
+only when the measured period is within 5 % of the estimate and the measured size within
+``HELD_SIZE`` = 10 % of it (``HeldBy.explains``); at the bound on most steps with another cycle
+is reported as that, with both ratios.
+
 A mode called stable that rings at the period of a mode called unstable (within 5 %), with a
 smaller modal amplitude than that one's (η²/2 is a mode's kinetic energy, so this compares
-energies), is driven by it: the limits of eq. 16 bound the norm of a 3-block, which couples the
-block's axes, and the coupling terms the linear modes leave out pass the cycle on. It is listed
-as driven, with its driver, and is no disagreement; a stable mode that rings alone, or louder
-than every unstable mode of its period, is one.
+energies), is driven by it: a stable mode forced by another's cycle answers at its period, and
+the cycle reaches it through the coupling terms the linear modes leave out (M̆(q) changes along
+the window while w is the representative step's; the limits of eq. 16 bound the norm of a
+3-block, which couples that block's axes). It is listed as driven, with its driver, and is no
+disagreement; a stable mode that rings alone, or louder than every unstable mode of its period,
+is one. Without delay every unstable mode rings at period 2, so there the period test admits
+any period-2 ring and the energy test carries the rule (the seed's driven modes measure 10⁻³ to
+10⁻⁶ of the bus yaw's modal amplitude).
+
+The mode loops drop the stiffness (eq. 35); the map of eq. 34 keeps it. Where the two disagree
+on whether the loop is stable (a step within a fraction of a percent of the bound, where the
+stiffness tips it), the modes cannot say what must ring, and the run does not agree whatever
+the data do (``Prediction.theory_consistent``).
 """
 
 from __future__ import annotations
@@ -36,6 +50,7 @@ BLOCK_UNITS = ("rad/s", "m/s", "rad/s")
 AT_BOUND_REL = 0.01  # a step or a rate within 1 % of its bound is at the bound (as eq. 16's C16)
 MOST = 0.5
 SAME_PERIOD = 0.05  # relative: two rings of one period (the periodogram's peaks)
+HELD_SIZE = 0.10  # relative: a relay cycle's size as its describing function estimates it
 
 
 @dataclass(frozen=True)
@@ -200,6 +215,9 @@ class HeldBy:
     at_bound_share: float
     period_estimate: float | None  # steps: the describing function's, 2π/ω_180 = 2(2d + 1)
     size_estimate: float  # peak to peak: (P/2)·dt·a_max for an acceleration bound, 2·w_max
+    period_ratio: float | None  # measured over estimated
+    size_ratio: float  # measured over estimated
+    explains: bool  # the measured cycle is the estimate's (period 5 %, size 10 %)
     rule: str
 
 
@@ -224,14 +242,17 @@ class Prediction:
     modes: list[ModeJudgement]
     omega_b: list[Ring]  # each component of the bus rate, for what rings there
     undetermined: int
+    theory_consistent: bool | None  # the mode loops and the map of eq. 34 agree on stability
     agrees: bool
 
 
 RULE = ("each damping mode of the loop as flown: predicted to ring when its root (eq. 35) is on "
         "or outside the unit circle; measured to ring when most of its modal coordinate's "
         "motion over the window is at periods of at most 20 steps and most of that is one "
-        "spectral line (eq. 36); a stable mode ringing at an unstable one's period with less "
-        "modal energy is driven by it, no disagreement; agrees only if every mode does")
+        "spectral line (eq. 36); a stable mode's ring that decays over the window is its "
+        "transient; a stable mode ringing at an unstable one's period with less "
+        "modal energy is driven by it, no disagreement; agrees only if every "
+        "mode does and the modes' stability is the map's (eq. 34)")
 
 
 def omega_b_rings(nu_breve: np.ndarray) -> list[Ring]:
@@ -239,12 +260,13 @@ def omega_b_rings(nu_breve: np.ndarray) -> list[Ring]:
     return [ring(nu_breve[:, i], REDUCED_SYMBOLS[i], "rad/s") for i in range(3)]
 
 
-def held_by(nu_block: np.ndarray, delay: int, dt: float, limits) -> HeldBy | None:
+def held_by(nu_block: np.ndarray, delay: int, dt: float, limits, measured: Ring
+            ) -> HeldBy | None:
     """The bound of a gain block's ν̆ 3-block (``limits``: its acceleration and rate bounds)
     that the data sit at on most steps, or None; for an acceleration bound, the cycle it
     holds as a relay: a describing function puts it at the loop's phase crossover, period
     2π/ω_180 = 2(2d + 1) steps (eq. 35: 2 without delay, 6 with one step), of size
-    (P/2)·dt·a_max peak to peak."""
+    (P/2)·dt·a_max peak to peak; whether the ``measured`` ring is that cycle."""
     name, a_max, w_max = limits
     steps = np.linalg.norm(np.diff(nu_block, axis=0), axis=1)
     rates = np.linalg.norm(nu_block, axis=1)
@@ -254,20 +276,28 @@ def held_by(nu_block: np.ndarray, delay: int, dt: float, limits) -> HeldBy | Non
         return None
     if at_acc >= at_rate:
         p = 2.0 * np.pi / mg.gain_margin(1.0, delay)[1]
-        return HeldBy(limit=f"{name}_acc", bound=a_max, at_bound_share=at_acc,
-                      period_estimate=p, size_estimate=0.5 * p * dt * a_max,
-                      rule="the acceleration bound as a relay: the cycle at the loop's phase "
-                           "crossover, period 2π/ω_180, (P/2)·dt·a_max peak to peak")
-    return HeldBy(limit=f"{name}_rate", bound=w_max, at_bound_share=at_rate,
-                  period_estimate=None, size_estimate=2.0 * w_max,
-                  rule="the rate at its bound: 2·w_max peak to peak")
+        limit, bound, share, size = f"{name}_acc", a_max, at_acc, 0.5 * p * dt * a_max
+        rule = ("the acceleration bound as a relay: the cycle at the loop's phase crossover, "
+                "period 2π/ω_180, (P/2)·dt·a_max peak to peak")
+    else:
+        p, limit, bound, share, size = None, f"{name}_rate", w_max, at_rate, 2.0 * w_max
+        rule = "the rate at its bound: 2·w_max peak to peak"
+    period_ratio = (measured.period_steps / p
+                    if p is not None and measured.period_steps is not None else None)
+    size_ratio = (measured.peak_to_peak or 0.0) / size
+    explains = bool((period_ratio is None or abs(period_ratio - 1.0) <= SAME_PERIOD)
+                    and abs(size_ratio - 1.0) <= HELD_SIZE)
+    return HeldBy(limit=limit, bound=bound, at_bound_share=share, period_estimate=p,
+                  size_estimate=size, period_ratio=period_ratio, size_ratio=size_ratio,
+                  explains=explains, rule=rule)
 
 
 def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: float,
-          delay: int, limits) -> Prediction:
+          delay: int, limits, map_radius: float | None) -> Prediction:
     """Each mode of ``modes`` against its modal coordinate in ``nu_breve`` (the window's ν̆,
     N×9) (eq. 36), on a loop of ``delay`` steps of delay. ``limits``: the controller's
-    ``limits`` block."""
+    ``limits`` block; ``map_radius``: the spectral radius of the loop's map (eq. 34), None
+    where it cannot be built (an imported log has no x̃)."""
     rings = []
     for m in modes:
         w = np.asarray(m.vector)
@@ -279,21 +309,28 @@ def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: 
         b = m.axis // 3
         name = BLOCK_LIMITS[b]
         bounds = (name, getattr(limits, f"{name}_acc"), getattr(limits, f"{name}_rate"))
-        held = (held_by(nu_breve[:, 3 * b:3 * b + 3], delay, dt, bounds)
-                if measured.rings else None)
         driver = (None if m.rings or not measured.rings else
                   _driver(measured, modal, [(o, r) for o, r in zip(modes, rings, strict=True)
                                             if o.rings]))
+        # A driven ring's block is at its bound through its driver's cycle, not its own.
+        held = (held_by(nu_breve[:, 3 * b:3 * b + 3], delay, dt, bounds, measured)
+                if measured.rings and driver is None else None)
+        # A stable mode's ring that fades over the window is its transient, what a stable
+        # root does (eq. 36's trend); an unstable one's must ring, whatever its trend.
+        transient = bool(not m.rings and measured.rings and measured.trend == "decaying")
         agrees = (None if measured.rings is None else
-                  True if driver is not None else measured.rings == m.rings)
+                  True if driver is not None or transient else measured.rings == m.rings)
         judged.append(ModeJudgement(mode=m.name, symbol=m.symbol, predicted_rings=m.rings,
                                     predicted_period_steps=m.period_steps, measured=measured,
                                     modal_peak_to_peak=modal.peak_to_peak, held_by=held,
                                     driven_by=driver, agrees=agrees))
     undetermined = sum(j.agrees is None for j in judged)
+    consistent = (None if map_radius is None else
+                  bool((map_radius >= mg.UNIT) == any(m.rings for m in modes)))
     return Prediction(rule=RULE, modes=judged, omega_b=omega_b_rings(nu_breve),
-                      undetermined=undetermined,
-                      agrees=bool(judged and undetermined == 0 and all(j.agrees for j in judged)))
+                      undetermined=undetermined, theory_consistent=consistent,
+                      agrees=bool(judged and undetermined == 0 and consistent is not False
+                                  and all(j.agrees for j in judged)))
 
 
 def _driver(measured: Ring, modal: Ring, unstable: list[tuple[ModeLoop, tuple[Ring, Ring]]]
@@ -305,3 +342,29 @@ def _driver(measured: Ring, modal: Ring, unstable: list[tuple[ModeLoop, tuple[Ri
               and abs(r[0].period_steps / measured.period_steps - 1.0) <= SAME_PERIOD
               and r[1].peak_to_peak > modal.peak_to_peak]
     return max(louder)[1] if louder else None
+
+
+def measured_words(j: ModeJudgement) -> str:
+    """What a mode's coordinate does in the data, in words (eq. 36): the ring's period, size,
+    trend, driver and limit, or 'quiet' or 'undetermined'."""
+    r = j.measured
+    if r.rings is None:
+        return "undetermined"
+    if not r.rings:
+        return "quiet"
+    words = (f"rings over {r.period_steps:.3g} steps, {r.peak_to_peak:.3g} {r.unit} peak to "
+             f"peak, {r.trend}")
+    if not j.predicted_rings and r.trend == "decaying" and j.driven_by is None:
+        words += " (the stable mode's transient)"
+    if j.driven_by is not None:
+        words += f", driven by the {j.driven_by} mode's cycle"
+    h = j.held_by
+    if h is not None:
+        est = (f"estimate {h.size_estimate:.3g}" + (f" over {h.period_estimate:.3g} steps"
+                                                    if h.period_estimate else ""))
+        words += (f", held by {h.limit} ({100 * h.at_bound_share:.0f} % of steps at it; {est})"
+                  if h.explains else
+                  f", at {h.limit} on {100 * h.at_bound_share:.0f} % of steps but not its cycle "
+                  f"({est}; measured/estimate: size {h.size_ratio:.3g}"
+                  + (f", period {h.period_ratio:.3g}" if h.period_ratio else "") + ")")
+    return words

@@ -47,9 +47,9 @@ def ringing_words(run: CompleteRecord) -> str:
         r = j.measured
         if not r.rings or j.driven_by:
             continue
-        held = f", held by {j.held_by.limit}" if j.held_by else ""
+        held = f", held by {j.held_by.limit}" if j.held_by and j.held_by.explains else ""
         parts.append(f"the {j.mode} mode over {r.period_steps:.3g} steps "
-                     f"({r.peak_to_peak:.3g} {r.unit} peak to peak{held})")
+                     f"({r.peak_to_peak:.3g} {r.unit} peak to peak, {r.trend}{held})")
     return "; ".join(parts) or "no mode"
 
 
@@ -73,6 +73,11 @@ def verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
     """The headline, from the modes of the loop as flown judged one by one (eqs. 35, 36)."""
     th, p = run.theory, run.prediction
     unstable = [m for m in th.modes if m.rings]
+    if p.theory_consistent is False:
+        return Verdict("inconclusive", "The damping modes' loops and the map of the loop as "
+                       f"flown disagree on its stability (spectral radius "
+                       f"{th.spectral_radius:.4g}; eq. 34 keeps the stiffness the modes drop): "
+                       "the modes cannot say which must ring.")
     if not p.agrees:
         wrong = [j.mode for j in p.modes if j.agrees is False]
         return Verdict("inconclusive", "Theory and data disagree mode by mode"

@@ -90,8 +90,10 @@ def environment() -> Environment:
     env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=_autoescape,
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
                       keep_trailing_newline=True)
+    from pipeline.analysis.verdict import measured_words
+
     env.filters.update(num=num, sci=sci, cell=cell, href=href, val=val, rel=rel,
-                       first_sentence=first_sentence)
+                       first_sentence=first_sentence, measured_words=measured_words)
     return env
 
 

@@ -123,8 +123,9 @@ def _margins() -> Outcome:
 
 
 @check("36", "ring() on synthetic series with known answers: oscillations of period 6 and 2 on "
-       "a slow trend (their period and peak to peak), white noise and a smooth series (no ring)",
-       "pipeline.analysis.ringing.ring")
+       "a slow trend (their period and peak to peak), a small one under a slew a thousand "
+       "times larger (rings), white noise and a smooth series (no ring), a stable mode's "
+       "decaying ring (decaying)", "pipeline.analysis.ringing.ring")
 def _ring() -> Outcome:
     from pipeline.analysis.ringing import ring
 
@@ -136,9 +137,17 @@ def _ring() -> Outcome:
         if not r.rings:
             raise AssertionError(f"a period-{period:g} oscillation does not ring: {r}")
         diffs += [abs(r.period_steps - period) / period, abs(r.peak_to_peak - 2 * amp) / (2 * amp)]
+    slew = 300.0 * np.sin(2 * np.pi * k / 500) + 0.15 * np.cos(np.pi * k)
+    r = ring(slew, "slew", "1")
+    if not r.rings:
+        raise AssertionError(f"a period-2 ring under a slew does not ring: {r}")
+    diffs.append(abs(r.peak_to_peak - 0.3) / 0.3)
     for name, x in (("white noise", rng(36).standard_normal(1000)), ("smooth", slow)):
         if ring(x, name, "1").rings:
             raise AssertionError(f"{name} rings")
+    fading = ring(slow + 0.995 ** k * np.cos(np.pi * k), "fading", "1")
+    if fading.trend != "decaying":
+        raise AssertionError(f"a ring decaying ×0.995 per step reads {fading.trend}")
     return Outcome("1000 steps; a 1333-step sine and a trend under each", max(diffs), 2e-3,
                    "largest relative error of period and peak to peak")
 
