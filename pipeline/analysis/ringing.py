@@ -21,10 +21,10 @@ ring fades over the window: :func:`pipeline.analysis.verdict.judge` counts a dec
 a mode called stable as its transient). The share is of the motion at periods of at most
 ``REFERENCE_STEPS`` = 60 (three times the band's longest), not of all of it: a slow manoeuvre
 of any size leaves it unchanged (a Hann window's leakage from hundreds of steps to 60 is
-below 1e−9 of its power),
-so a ring under a large slew is still seen. "Decaying" is the last third of the window's band
-part less than half the size of its first third: a root of modulus r fades by r^(N/3), so on a
-window of N steps a mode decaying faster than 2^(−3/N) per step reads as decaying. The peak's
+below 1e−9 of its power), so a ring under a large slew is still seen. "Decaying" is the last
+third of the window's band part less than half the size of its first third: a root of modulus
+r fades by r^(N/3), so on a window of N steps a mode decaying faster than 2^(−3/N) per step
+reads as decaying. The peak's
 period is 1/f_peak, f_peak refined by a parabola through the log periodogram at the peak and
 its neighbours (period 2 exactly at the Nyquist bin); the size is the peak-to-peak of the band's
 part of the series (:func:`short_period_part`). A series shorter than
@@ -45,7 +45,7 @@ TRIM = 4 * BAND_STEPS  # the high pass's start-up transient, trimmed at either e
 REFERENCE_STEPS = 3 * BAND_STEPS  # the fast motion the band's share is of
 MIN_STEPS = 10 * BAND_STEPS
 RESOLUTION_ULPS = 64
-SUSTAINED = 0.5  # the last third's size against the first's: below, decaying
+DECAYING = 0.5  # the last third's size against the first's: below, decaying
 GROWING = 2.0  # above: the data grow over the window
 
 
@@ -69,7 +69,7 @@ class Ring:
         if self.growth is None:
             return None
         return ("growing" if self.growth > GROWING else
-                "decaying" if self.growth < SUSTAINED else "steady")
+                "decaying" if self.growth < DECAYING else "steady")
 
 
 def _undetermined(coordinate: str, unit: str) -> Ring:

@@ -41,14 +41,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.analysis import margins as mg
-from pipeline.analysis.ringing import Ring, ring
+from pipeline.analysis.ringing import MOST, Ring, ring
 from pipeline.sim.stability import GAIN_BLOCKS, REDUCED_SYMBOLS, damping_modes
 
 # The limit names of each gain block's 3-block of ν̆ (eq. 16), and its units.
 BLOCK_LIMITS = ("omega_b", "nu_e_lin", "nu_e_ang")
 BLOCK_UNITS = ("rad/s", "m/s", "rad/s")
 AT_BOUND_REL = 0.01  # a step or a rate within 1 % of its bound is at the bound (as eq. 16's C16)
-MOST = 0.5
 SAME_PERIOD = 0.05  # relative: two rings of one period (the periodogram's peaks)
 HELD_SIZE = 0.10  # relative: a relay cycle's size as its describing function estimates it
 
