@@ -181,7 +181,8 @@ def decisions(runs: list[RunData]) -> list[Decision]:
         rec = by_name[bad.run].record
         ringing = [(m, j) for m, j in zip(rec.theory.modes, rec.prediction.modes, strict=True)
                    if j.measured.rings and not j.driven_by]
-        held = {j.held_by.limit for _, j in ringing if j.held_by}
+        # A limit is named only for the cycle it holds (HeldBy.explains), as the modes' table.
+        held = {j.held_by.limit for _, j in ringing if j.held_by and j.held_by.explains}
         verdict = (f"{robot}: on {t.loop}, {bad.run} (dt {bad.dt:g} s, {bad.integrator}) is "
                    f"unstable: " + ", ".join(f"{m.symbol} (|z| {m.modulus:.3g})"
                                              for m, _ in ringing)
