@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
+from pipeline.sim.margins import dominant_root, gain_margin, loop_gain, root_regime
 from pipeline.sim.robot_file import RobotCard
 from pipeline.sim.stability import DampingMode, ModeFixes
 from pipeline.spec import Spec, load_spec
@@ -33,6 +34,7 @@ class Validation:
     card: RobotCard  # at q̄, with the spec's gains: μ_bus = D_b/I_zz,bus, μ_roll = D_o/I_roll
     modes: list[DampingMode]  # of M̆⁻¹D̆ at the start state, fastest first (eq. 21)
     fixes: ModeFixes  # of the fastest (eq. 24)
+    fix: str  # what meets the spec's requirement on the loop as flown (eq. 35)
 
     @property
     def mu_bus(self) -> float:
@@ -61,9 +63,11 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
     from pipeline.sim.stability import damping_modes, mode_fixes
 
     mission = Mission(spec)
-    M, D, _, _ = mission.linearised_loop(mission.initial_state())
+    s0 = mission.initial_state()
+    M, D, _, _ = mission.linearised_loop(s0)
     return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, mission.robot.card(q),
-                      damping_modes(M, D), mode_fixes(M, D, spec.mission.dt))
+                      damping_modes(M, D), mode_fixes(M, D, spec.mission.dt),
+                      mission.guard_fix(s0)[1])
 
 
 def _plant(p) -> str:
@@ -93,8 +97,7 @@ def report_lines(v: Validation) -> list[str]:
     """The lines ``validate`` prints, every number computed from the spec and the budget."""
     s, est, m = v.spec, v.estimate, v.spec.mission
     integ = s.controller.integrator
-    stable = ("explicit: stable in this mode only below 2" if integ == "explicit"
-              else "imex: the damping is implicit, no step bound")
+    stable = _loop_words(integ, m.plant.delay_steps, m.dt * v.mu_bus)
     c = v.card
     return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
             f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
@@ -106,11 +109,22 @@ def report_lines(v: Validation) -> list[str]:
             f"{c.roll_boresight_cos:.6f}: exact when both offsets are 0 and |cos| = 1)"]
 
 
-def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
-    """Every damping mode at the start, the fastest named with the gain that sets it, and its
-    fixes: the largest step and gain, stable and with the margin dt·μ ≤ 1 (eqs. 21, 24)."""
-    from pipeline.analysis.theory import regime
+def _loop_words(integrator: str, delay: int, dt_mu: float) -> str:
+    """A mode's loop as flown (eq. 35): its root's behaviour and the bound on dt·μ that keeps
+    it stable with the plant's delay (g = dt·μ explicit, dt·μ/(1 + dt·μ) imex, below B)."""
+    bound = gain_margin(1.0, delay)[0]
+    z = dominant_root(loop_gain(dt_mu, integrator), delay)
+    if integrator == "explicit":
+        limit = f"stable below {bound:.3g}"
+    else:
+        limit = ("stable at any step" if bound >= 1.0 else
+                 f"stable below {bound / (1.0 - bound):.3g}")
+    return f"{integrator}, {delay} step(s) of delay: {root_regime(z)} ({limit})"
 
+
+def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
+    """Every damping mode at the start, the fastest named with the gain that sets it, and what
+    meets the spec's requirement on the loop as flown, its plant and delay (eqs. 21, 35)."""
     f = v.fixes
     fast = f.mode
     listed = ", ".join(f"{m.mu:.4g} ({m.name})" for m in v.modes)
@@ -120,26 +134,9 @@ def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
         f"  damping modes at the start, μ of M̆⁻¹D̆ in 1/s (eq. 21), fastest first: {listed}",
         f"  fastest: {fast.name}, μ = {fast.mu:.4g} 1/s, dt·μ = {f.dt_mu:.3g}, its rate set by "
         f"{gain} = {f.gain:.4g} {unit} (share {fast.shares[fast.block]:.3f}); "
-        + (f"explicit: {regime(f.dt_mu)} (stable below 2)" if integ == "explicit"
-           else "imex: the damping is implicit, no step bound from it"),
+        + _loop_words(integ, v.spec.mission.plant.delay_steps, f.dt_mu),
     ]
-    if integ != "explicit":
-        return lines
-
-    def gain_text(g: float | None) -> str:
-        if g is not None:
-            return f"{gain} at most {g:.4g} {unit}"
-        return (f"no value of {gain} (with it at 0 the fastest mode still has dt·μ = "
-                f"{dt * f.mu_without:.3g})")
-
-    lines += [
-        f"  fixes (stable, dt·μ < 2): mission.dt below 2/μ = {f.dt_stable:.4g} s, or "
-        f"{gain_text(f.gain_stable)} at dt = {dt:g} s, or controller.integrator: imex",
-        f"  with a margin (dt·μ ≤ 1: half the bound, and the bound itself under one step of "
-        f"computation delay, z² − z + dt·μ = 0): mission.dt at most {f.dt_margin:.4g} s, or "
-        f"{gain_text(f.gain_margin)} at dt = {dt:g} s",
-    ]
-    return lines
+    return [*lines, "  " + v.fix]
 
 
 def _cost_lines(v: Validation, s: Spec, est: Estimate, m, integ: str) -> list[str]:

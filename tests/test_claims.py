@@ -322,7 +322,14 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "fix_gains": "omega_ripple_sampled_gains",
         "fix_delay_imex": "omega_ripple_sampled_delay_imex",
         "fix_delay_dt": "omega_ripple_sampled_delay_dt0035",
-        "fix_delay_gains": "omega_ripple_sampled_delay_gains"}
+        "fix_delay_gains": "omega_ripple_sampled_delay_gains",
+        # The servicer's, 30 s too.
+        "svc_sampled": "servicer_sampled", "svc_sampled_delay": "servicer_sampled_delay",
+        "svc_fix_imex": "servicer_sampled_imex", "svc_fix_dt": "servicer_sampled_dt010",
+        "svc_fix_gains": "servicer_sampled_gains",
+        "svc_fix_delay_imex": "servicer_sampled_delay_imex",
+        "svc_fix_delay_dt": "servicer_sampled_delay_dt005",
+        "svc_fix_delay_gains": "servicer_sampled_delay_gains"}
     assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
                                                         for n, r in full.runs.items()}
     assert {n: r.against for n, r in ci.runs.items()} == {n: r.against

@@ -18,13 +18,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from pipeline.analysis import margins as mg
 from pipeline.analysis.ringing import MIN_STEPS, ring
 from pipeline.analysis.stages import analyze_log
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import load_mapping
 from pipeline.importer.run import import_log
 from pipeline.logs import verify_log
+from pipeline.sim import margins as mg
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 from pipeline.store.door import ArtefactStore
@@ -313,12 +313,15 @@ def test_the_wrong_mode_ringing_reads_disagree(roll_rings):
 def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
     """The fix table's verdicts: the delayed run rings (unstable); the implicit damping with
     one step of delay, stable and quiet in every mode, misses the requirement (its bus yaw's
-    gain margin is 2.0 dB) and is not called a fix; the smaller step that meets it is."""
+    gain margin is 2.0 dB) and is not called a fix; the smaller step that meets it is; the
+    damping cut that meets it at the representative step but takes the arm below the damped
+    inverse's floor is not judged (the theory does not hold there), let alone a fix."""
     from pipeline.reports.figures import RunData
     from pipeline.reports.fixes import FIX, decisions, fix_tables
 
     runs = []
-    for name in ("omega_ripple_sampled_delay_imex", "omega_ripple_sampled_delay_dt0035"):
+    for name in ("omega_ripple_sampled_delay_imex", "omega_ripple_sampled_delay_dt0035",
+                 "omega_ripple_sampled_delay_gains"):
         o = run_spec(with_overrides(load_spec(name), {"mission.duration": 12.0}, name=name),
                      tmp_path)
         log = verify_log(o.path)
@@ -332,6 +335,10 @@ def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
     assert verdict["omega_ripple_sampled_delay_imex"].startswith(
         "stable and quiet, misses the requirement")
     assert verdict["omega_ripple_sampled_delay_dt0035"] == FIX
+    gains = next(r for r in table.rows if r.run == "omega_ripple_sampled_delay_gains")
+    assert gains.meets and gains.agrees and gains.below_floor > 0
+    assert gains.verdict.startswith("not judged: below the damped inverse's floor on ")
     (d,) = decisions(runs)
     assert "omega_ripple_sampled_delay_dt0035" in d.fix and "not a fix" in d.fix
+    assert "omega_ripple_sampled_delay_gains" not in d.fix.split("not a fix")[0]
     assert d.verdict.startswith("robots/seed_ur3_box.xml: on sampled-data plant")

@@ -130,7 +130,7 @@ def test_the_bus_torque_limit_bounds_the_norm_and_keeps_the_direction():
 def test_the_delayed_modes_root_against_its_closed_form_and_a_simulation(dt_mu):
     """z² − z + dt·μ = 0 (eqs. 24, 35 with d = 1): real below ¼, else modulus √(dt·μ) at angle
     arccos(1/(2√(dt·μ))); and the recursion e⁺ = e − dt·μ·e⁻ grows by that modulus per step."""
-    from pipeline.analysis.margins import dominant_root, period_steps
+    from pipeline.sim.margins import dominant_root, period_steps
 
     z = dominant_root(dt_mu, 1)
     if dt_mu < 0.25:

@@ -164,12 +164,14 @@ def test_guard_warns_once_under_explicit_beyond_two(guard_runs):
     dt_map = float(w.split("dt*_map = ")[1].split(" s")[0])
     assert dt_map < 2 / mu < spec.mission.dt
     assert res.columns["dt_mu_max"][0] == pytest.approx(spec.mission.dt * mu, rel=1e-9)
-    # The fastest mode named, and the bus gain that puts it at dt·μ = 2: 2·I_zz,bus/dt for the
-    # seed robot's bus yaw, whose rate is D_b/I_zz,bus (the robot card's closed form).
+    # The fastest mode named, and the bus gain that meets the requirement (6 dB, 30°, one step)
+    # on the simulator's update: the delay margin dt/g ≥ dt caps g = dt·μ at 1, so D_b at
+    # I_zz,bus/dt for the seed robot's bus yaw, whose rate is D_b/I_zz,bus (the robot card's
+    # closed form).
     card = robot_card(Mission(spec).robot.model, res.columns["q"][0], spec.controller.gains.bus.D)
     assert "μ_max the bus yaw ω_b,z mode's" in w
-    d_max = float(w.split("controller.gains.bus.D below ")[1].split(" ")[0])
-    assert d_max == pytest.approx(2 * card.I_zz_bus / spec.mission.dt, rel=1e-3)
+    d_max = float(w.split("bus.D ≤ ")[1].split(",")[0])
+    assert d_max == pytest.approx(card.I_zz_bus / spec.mission.dt, rel=1e-3)
 
 
 def test_guard_silent_under_imex(guard_runs):
@@ -584,25 +586,35 @@ def test_pointing_and_coverage_agree_across_the_three(short_logs):
 
 
 
-def test_the_guards_step_warning_names_the_mode_and_its_fixes_with_margins():
-    """The per-step message (dt·μ_max passing 2 along the mission) names the fastest mode and
-    its fixes (eq. 24). On a decoupled M̆ = diag(I), D̆ = diag(d) the closed forms hold: the
-    camera roll's rate is d_o/I_roll, the largest stable gain 2·I_roll/dt, with the margin
-    dt·μ ≤ 1 half of it, and the step with the margin I_roll/d_o."""
-    from pipeline.sim.mission import stability_warning
-    from pipeline.sim.stability import mode_fixes
+@pytest.mark.parametrize("delay, bound, g_max", [(0, 2.0, 1.0), (1, 1.0, 10 ** (-6 / 20))])
+def test_the_guards_step_warning_names_the_mode_and_fixes_that_meet_the_requirement(
+        delay, bound, g_max):
+    """The per-step message names the fastest mode, forward Euler's bound with the plant's
+    delay, and the changes that meet the requirement on that loop (eq. 35). On a decoupled
+    M̆ = diag(I), D̆ = diag(d) the camera roll's rate is d_o/I_roll; the requirement (6 dB, 30°,
+    one step) caps its loop gain g at 1 without delay (delay margin dt/g ≥ dt) and at
+    10^(−6/20) with one step (GM = 1/g): closed forms, not the bisection's. The implicit damping
+    (g = x/(1 + x), x = dt·μ = 2.94) meets it without delay and is short of it with one step,
+    its gain margin 20·log10((1 + x)/x) dB."""
+    from pipeline.sim.margins import Requirement, requirement_fixes
+    from pipeline.sim.mission import fix_text, stability_warning
 
     inertia = np.array([0.5, 0.5, 10.6, 2, 2, 2, 0.02, 0.02, 0.0102])
     gains = np.repeat([2.0, 4.0, 1.0], 3)
     dt = 0.03
-    fixes = mode_fixes(np.diag(inertia), np.diag(gains), dt)
-    w = stability_warning(412, dt * 1.0 / 0.0102, dt, fixes)
-    assert w.startswith("step 412: dt·μ_max = 2.94 > 2")
-    assert "camera roll ω_e,z (about the boresight) mode's" in w
-    stable = float(w.split("controller.gains.cam_ori.D below ")[1].split(" ")[0])
-    margin = float(w.split("(now 1, ")[1].split(" ")[0])
-    dt_margin = float(w.split("mission.dt ≤ ")[1].split(" s")[0])
-    # The other cam_ori axes (I = 0.02) stay below the bound: the roll sets it.
-    assert stable == pytest.approx(2 * 0.0102 / dt, rel=1e-3)
-    assert margin == pytest.approx(0.0102 / dt, rel=1e-3)
-    assert dt_margin == pytest.approx(0.0102 / 1.0, rel=1e-3)
+    fixes = requirement_fixes(np.diag(inertia), np.diag(gains), dt, "explicit", delay,
+                              Requirement(6.0, 30.0, 1.0))
+    w = stability_warning(412, dt / 0.0102, bound, delay, "camera roll", fix_text(fixes, "R"))
+    assert w.startswith(f"step 412: dt·μ_max = 2.94 > {bound:g} ")
+    assert "the camera roll mode's" in w
+    gain = float(w.split("cam_ori.D ≤ ")[1].split(";")[0])
+    dt_ok = float(w.split("mission.dt ≤ ")[1].split(" s")[0])
+    # The other cam_ori axes (I = 0.02) stay slower: the roll sets both.
+    assert gain == pytest.approx(g_max * 0.0102 / dt, rel=1e-3)
+    assert dt_ok == pytest.approx(g_max * 0.0102 / 1.0, rel=1e-3)
+    x = dt / 0.0102
+    if delay == 0:
+        assert "controller.integrator: imex" in w.split("short of it")[0]
+    else:
+        gm = float(w.split("controller.integrator: imex (least GM ")[1].split(" dB")[0])
+        assert gm == pytest.approx(20 * np.log10((1 + x) / x), abs=0.01)

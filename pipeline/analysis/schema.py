@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 from typing import Any, Union
 
 from pipeline.analysis.harm import Harm, RollSmear
-from pipeline.analysis.margins import Complex, Requirement
-from pipeline.analysis.verdict import ModeLoop, Prediction, RequirementFix
+from pipeline.analysis.verdict import ModeLoop, Prediction
+from pipeline.sim.margins import Complex, Requirement, RequirementFix
 from pipeline.sim.robot_file import RobotCard
 
 _OPTIONAL = "optional"

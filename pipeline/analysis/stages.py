@@ -19,15 +19,15 @@ from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, rebuild_gamma
 from pipeline.analysis.harm import harm, roll_smear
-from pipeline.analysis.margins import period_steps, root_regime
 from pipeline.analysis.schema import value_at
-from pipeline.analysis.verdict import judge, mode_loops, requirement_fixes
+from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.linalg import batched_singular_values
+from pipeline.sim.margins import period_steps, requirement_fixes, root_regime
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import BUS_YAW_AXIS, ModeFixes, damping_modes, mode_fixes
 from pipeline.spec import Spec

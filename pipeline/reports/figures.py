@@ -298,7 +298,7 @@ def mode_margins(run: RunData, path: Path) -> None:
     """The fastest damping mode's loop as flown (eq. 35), L(z) = g z^−d/(z − 1) on the unit
     circle (a Nyquist plot, left) with its gain and phase margins marked against −1, and the
     closed-loop roots of every mode's loop in the z-plane (right)."""
-    from pipeline.analysis.margins import characteristic
+    from pipeline.sim.margins import characteristic
 
     th = run.record.theory
     fast = th.modes[0]
@@ -396,18 +396,31 @@ def conditioning(runs: list[RunData], path: Path,
     _save(fig, path)
 
 
+def _delay(run: RunData) -> int:
+    """The computation delay the run flew, in steps (0 on the simulator's update)."""
+    return int(getattr(getattr(run.record, "theory", None), "delay_steps", 0) or 0)
+
+
 def dt_mu(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = None) -> None:
     """The online guard's dt·μ_max per step; runs of one robot and dt coincide, so each is
     drawn in its own line style and width with staggered markers."""
+    from pipeline.sim.margins import gain_margin
+
     styles = _styles(runs, styles)
-    fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     n = len(runs)
+    # Tall enough for its legend (one line per run): a legend taller than the axes collapses
+    # the constrained layout.
+    fig, ax = plt.subplots(figsize=(8, max(3.6, 0.8 + 0.19 * (n + 2))), layout="constrained")
     for j, r in enumerate(runs):
         c = _cols(r, ["t", "dt_mu_max"])
         ax.plot(c["t"], c["dt_mu_max"],
                 label=label(f"{r.name} ({r.record.integrator})"),
                 **_line_kw(styles[r.name], j, n, len(c["t"])))
-    ax.axhline(2.0, color="k", lw=1.0, ls="--", label="2: forward-Euler bound")
+    # Forward Euler's bound on each delay flown (eq. 35: 2 without delay, 1 with one step).
+    for d, ls in zip(sorted({_delay(r) for r in runs}), ("--", ":", "-."), strict=False):
+        b = gain_margin(1.0, d)[0]
+        ax.axhline(b, color="k", lw=1.0, ls=ls,
+                   label=f"{b:.3g}: forward Euler's bound, {d} step(s) of delay")
     ax.set(title="dt·μ_max over the mission", xlabel="t (s)",
            ylabel=f"dt·μ_max ({DIMLESS})", ylim=(0, None))
     _legend_right(ax)

@@ -1,8 +1,9 @@
 """The fix tables (issue 32): per robot and loop as flown (plant and delay), every analysed run,
 what flew (step, integrator, damping gains), whether every mode meets the spec's requirement
 (eq. 35), what rings in the data (eq. 36) and the cost; a run is called a fix only where every
-mode meets the requirement on the loop it declares, the data ring in no mode and the theory and
-data agree mode by mode. Every cell is read from the runs' analysis records.
+mode meets the requirement on the loop it declares, the data ring in no mode, the theory and
+data agree mode by mode and the arm stayed above the damped inverse's floor over the window
+(where the theory holds). Every cell is read from the runs' analysis records.
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ class FixRow:
     pointing_err_deg_max: float
     boresight_err_deg_max: float
     steps_per_s: float
+    below_floor: int  # window steps with σ_min(J⊕) below the damped inverse's floor
+    window_steps: int
     verdict: str
 
 
@@ -49,7 +52,14 @@ class FixTable:
         return [r for r in self.rows if r.verdict == FIX]
 
 
-def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float) -> str:
+def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
+             below_floor: int, window_steps: int) -> str:
+    # The theory (eqs. 21, 34, 35) is the loop's linearisation above the damped inverse's
+    # floor; a run that spends window steps below it flew another loop there, so neither its
+    # margins nor its agreement speak for those steps: no verdict, least of all "fix".
+    if below_floor:
+        return (f"not judged: below the damped inverse's floor on {below_floor} of "
+                f"{window_steps} window steps, where the theory does not hold")
     if not agrees:
         return "theory and data disagree"
     if rings:
@@ -67,6 +77,8 @@ def fix_row(r: RunData) -> FixRow:
     meets = all(m.margins.meets for m in th.modes)
     gains = r.spec.get("controller", {}).get("gains", {})
     fast = th.modes[0]
+    below = int(th.window_steps_below_floor)
+    steps = int(rec.window.stop_step - rec.window.start_step)
     return FixRow(
         run=r.name, dt=rec.dt, integrator=rec.integrator,
         gains=f"bus {gains.get('bus', {}).get('D', '?')}, "
@@ -77,7 +89,9 @@ def fix_row(r: RunData) -> FixRow:
         delay_margin_ms=1e3 * least.margins.delay_margin_s, rings=", ".join(rings),
         agrees=p.agrees, pointing_err_deg_max=rec.metrics.pointing_err_deg_max,
         boresight_err_deg_max=rec.metrics.boresight_err_deg_max, steps_per_s=1.0 / rec.dt,
-        verdict=_verdict(meets, rings, p.agrees, least.symbol, least.margins.gain_margin_db))
+        below_floor=below, window_steps=steps,
+        verdict=_verdict(meets, rings, p.agrees, least.symbol, least.margins.gain_margin_db,
+                         below, steps))
 
 
 def _loop_words(plant: str, delay: int) -> str:

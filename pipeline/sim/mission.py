@@ -41,6 +41,7 @@ from pipeline.sim.control_step import (
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import breve_bounds
 from pipeline.sim.linalg import matvec
+from pipeline.sim.margins import Requirement, RequirementFix, gain_margin, requirement_fixes
 from pipeline.sim.plant import (
     attitude_excursion,
     held_command,
@@ -50,10 +51,9 @@ from pipeline.sim.plant import (
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import (
-    ModeFixes,
     bisect_critical_step,
     critical_step,
-    mode_fixes,
+    damping_modes,
     posture_stiffness,
 )
 from pipeline.sim.target import CoverageCounter, build_target
@@ -150,6 +150,16 @@ class Mission:
         integrator, plant = self.spec.controller.integrator, self.spec.mission.plant
         return critical_step(mu_max), bisect_critical_step(
             M, D, K_x, J_x, integrator, plant=plant.model, delay=plant.delay_steps)
+
+    def guard_fix(self, s: LoopState) -> tuple[str, str]:
+        """(the fastest damping mode's name, what meets the spec's requirement on the loop as
+        flown) at state ``s`` (eqs. 21, 35): the guard's messages, off the per-step path."""
+        M, D, _, _ = self.linearised_loop(s)
+        spec = self.spec
+        fixes = requirement_fixes(M, D, self.dt, spec.controller.integrator,
+                                  spec.mission.plant.delay_steps,
+                                  Requirement(**spec.requirements.model_dump()))
+        return damping_modes(M, D)[0].name, fix_text(fixes, requirement_words(spec))
 
     def linearised_loop(self, s: LoopState) -> tuple[np.ndarray, ...]:
         """(M̆, D̆, K_x, J_x) at state ``s``: the reduced inertia, the damping gains after the γ
@@ -281,10 +291,12 @@ class Mission:
         # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
         # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
         dt_damping, dt_map = self.critical_steps(s0)
+        integrator, delay = self.spec.controller.integrator, self.spec.mission.plant.delay_steps
+        # Forward Euler's bound on dt·μ with the plant's delay: g at a gain margin of 1 (eq. 35).
+        bound = gain_margin(1.0, delay)[0]
         if dt_map is not None and self.dt >= dt_map:
-            M, D, _, _ = self.linearised_loop(s0)
-            warned.append(map_warning(self.dt, dt_map, dt_damping,
-                                      self.spec.controller.integrator, mode_fixes(M, D, self.dt)))
+            mode, fix = self.guard_fix(s0)
+            warned.append(map_warning(self.dt, dt_map, dt_damping, integrator, mode, fix))
         clipped = 0
         # Overflow shows as a non-finite state, caught below at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
@@ -300,15 +312,16 @@ class Mission:
                 if not finite:
                     flush(i)
                     return result("failed", k, k, f"step {k}: {why}")
-                if explicit and not warned and rows[i, _DT_MU] > 2:
-                    M, D, _, _ = self.linearised_loop(row_state(rows[i]))
-                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), self.dt,
-                                                    mode_fixes(M, D, self.dt)))
+                if explicit and not warned and rows[i, _DT_MU] > bound:
+                    mode, fix = self.guard_fix(row_state(rows[i]))
+                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), bound, delay,
+                                                    mode, fix))
                 clipped = clipped + 1 if rows[i, _SAT_V_MAX] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
                     flush(i + 1)
+                    fix = self.guard_fix(row_state(rows[i]))[1]
                     return result("diverged", k + 1, k, divergence_message(
-                        k, float(rows[i, _DT_MU]), self.dt, self.spec.controller.integrator))
+                        k, float(rows[i, _DT_MU]), self.dt, fix))
                 if i + 1 == size and k + 1 < n:
                     flush(size)
                     first = k + 1
@@ -336,49 +349,52 @@ def row_state(row: np.ndarray) -> LoopState:
                      v_breve=row[ROW["v_breve"]].copy(), tau=float(row[ROW["tau"].start]))
 
 
-def _fix_text(fixes: ModeFixes) -> str:
-    """The gain and margin fixes of the fastest mode (eq. 24), for the guard's messages."""
-    gain = ""
-    if fixes.gain_stable is not None:
-        margin = (f", {fixes.gain_margin:.4g} with the margin dt·μ ≤ 1"
-                  if fixes.gain_margin is not None else "")
-        gain = (f", or controller.gains.{fixes.gain_block}.D below {fixes.gain_stable:.4g} "
-                f"(now {fixes.gain:.4g}{margin})")
-    return (f"{gain}; with the margin dt·μ ≤ 1 (the bound under one step of delay) mission.dt "
-            f"≤ {fixes.dt_margin:.4g} s")
+def requirement_words(spec: Spec) -> str:
+    """The spec's requirement and the loop it is judged on (eq. 35), for messages."""
+    r, plant = spec.requirements, spec.mission.plant
+    loop = ("the simulator's update" if plant.model == "reduced" else
+            f"the sampled-data plant with {plant.delay_steps} step(s) of delay")
+    return (f"GM ≥ {r.gain_margin_db:g} dB, PM ≥ {r.phase_margin_deg:g}°, DM ≥ "
+            f"{r.delay_margin_steps:g} step on {loop}")
 
 
-def divergence_message(step: int, dt_mu_max: float, dt: float, integrator: str) -> str:
-    """Why a run was stopped as diverged, with the bound and the fix (eqs. 16, 21, 24)."""
-    dt_star = 2 * dt / dt_mu_max
-    fix = ("set controller.integrator: imex, or mission.dt below dt* "
-           if integrator == "explicit" and dt_mu_max > 2 else "check the gains and limits; dt* ")
+def fix_text(fixes: list[RequirementFix], requirement: str) -> str:
+    """What meets the requirement on the loop as flown, and what does not (eq. 35): the
+    guard's and validate's fixes come from the theory the reports' fix tables read, so no
+    message calls a change a fix that fails the requirement with the spec's delay."""
+    if fixes[0].meets:
+        return (f"The loop as flown meets the requirement ({requirement}): least GM "
+                f"{fixes[0].gain_margin_db:.3g} dB, {fixes[0].worst_mode}")
+    ok = [f.change for f in fixes[1:] if f.meets]
+    short = [f"{f.change} (least GM {f.gain_margin_db:.3g} dB, {f.worst_mode})"
+             for f in fixes[1:] if not f.meets]
+    text = (f"Fix ({requirement}): " + "; or ".join(ok) if ok else
+            f"No single change meets the requirement ({requirement})")
+    return text + (f"; short of it: {'; '.join(short)}" if short else "")
+
+
+def divergence_message(step: int, dt_mu_max: float, dt: float, fix: str) -> str:
+    """Why a run was stopped as diverged, with the bound and the fixes (eqs. 16, 21, 35)."""
     return (f"step {step}: the velocity stayed on the v_max clip for {DIVERGENCE_STEPS} "
-            f"consecutive steps; dt·μ_max = {dt_mu_max:.3g}, dt* = 2/μ_max = {dt_star:.4g} s. Fix: "
-            f"{fix}= {dt_star:.4g} s")
+            f"consecutive steps; dt·μ_max = {dt_mu_max:.3g}, dt*_damping = 2/μ_max = "
+            f"{2 * dt / dt_mu_max:.4g} s. {fix}")
 
 
-def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str,
-                fixes: ModeFixes) -> str:
+def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str, mode: str,
+                fix: str) -> str:
     """The online guard's message when mission.dt is past the map's critical step (eq. 24),
-    naming the fastest damping mode and the gain that would fix it, with their margins
-    (eq. 21)."""
-    fix = ("set controller.integrator: imex, or mission.dt below" if integrator == "explicit"
-           else "set mission.dt below")
-    gain = _fix_text(fixes) if integrator == "explicit" else ""
+    naming the fastest damping mode and what meets the requirement on this loop (eq. 35)."""
     return (f"step 0: mission.dt = {dt:.4g} s is at or above the critical step dt*_map = "
             f"{dt_map:.4g} s (the spectral radius of the map of the loop as flown, eq. 34: "
             f"stiffness, plant and delay included, reaches 1; the damping-only bound "
-            f"dt*_damping = 2/μ_max = {dt_damping:.4g} s, "
-            f"μ_max the {fixes.mode.name} mode's) under the {integrator} integrator: the loop is "
-            f"unstable. Fix: {fix} {dt_map:.4g} s{gain}")
+            f"dt*_damping = 2/μ_max = {dt_damping:.4g} s, μ_max the {mode} mode's) under the "
+            f"{integrator} integrator: the loop is unstable. {fix}")
 
 
-def stability_warning(step: int, dt_mu_max: float, dt: float, fixes: ModeFixes) -> str:
-    """The online guard's one message (eq. 21): name the mode at that step, the bound and the
-    fixes, with their margins (eq. 24)."""
-    dt_star = 2 * dt / dt_mu_max
-    return (f"step {step}: dt·μ_max = {dt_mu_max:.3g} > 2 under the explicit integrator: the "
-            f"{fixes.mode.name} mode's velocity damping is period-2 unstable (forward Euler). "
-            f"Fix: set controller.integrator: imex, or mission.dt below dt* = 2/μ_max = "
-            f"{dt_star:.4g} s{_fix_text(fixes)}")
+def stability_warning(step: int, dt_mu_max: float, bound: float, delay: int, mode: str,
+                      fix: str) -> str:
+    """The online guard's one message (eqs. 21, 35): the mode at that step, forward Euler's
+    bound with the plant's delay, and what meets the requirement."""
+    return (f"step {step}: dt·μ_max = {dt_mu_max:.3g} > {bound:.3g} (forward Euler's bound "
+            f"with {delay} step(s) of delay, eq. 35): the {mode} mode's velocity damping is "
+            f"unstable. {fix}")

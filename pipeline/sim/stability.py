@@ -214,11 +214,16 @@ def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]
     return modes
 
 
-def mu_max_with_gain(M_breve: np.ndarray, D_breve: np.ndarray, block: int, d: float) -> float:
-    """μ_max of M̆⁻¹D̆ with the damping gain of block ``block`` set to d (eq. 21)."""
+def with_gain(D_breve: np.ndarray, block: int, d: float) -> np.ndarray:
+    """D̆ with the damping gain of block ``block`` set to d (eq. 13)."""
     D = D_breve.copy()
     D[3 * block:3 * block + 3, 3 * block:3 * block + 3] = d * np.eye(3)
-    return damping_modes(M_breve, D)[0].mu
+    return D
+
+
+def mu_max_with_gain(M_breve: np.ndarray, D_breve: np.ndarray, block: int, d: float) -> float:
+    """μ_max of M̆⁻¹D̆ with the damping gain of block ``block`` set to d (eq. 21)."""
+    return damping_modes(M_breve, with_gain(D_breve, block, d))[0].mu
 
 
 def largest_stable_gain(M_breve: np.ndarray, D_breve: np.ndarray, block: int,

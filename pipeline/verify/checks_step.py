@@ -90,9 +90,9 @@ def _held_loop_grows(g: float, total_delay: float, steps: int = 3000) -> float:
        "independent computations: the closed loop at g·GM on the unit circle (eigenvalues of "
        "its companion matrix), |L| and ∠L at ω_c by complex arithmetic, the delay margin by "
        "a time-domain simulation of the held loop 5 % either side of it",
-       "pipeline.analysis.margins.margins")
+       "pipeline.sim.margins.margins")
 def _margins() -> Outcome:
-    from pipeline.analysis import margins as mg
+    from pipeline.sim import margins as mg
 
     req = mg.Requirement(6.0, 30.0, 1.0)
     diffs, parts = [], []

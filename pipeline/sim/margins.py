@@ -40,6 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.sim.stability import GAIN_BLOCKS, damping_modes, with_gain
+
 UNIT = 1.0  # a root of this modulus is on the unit circle: marginal
 
 
@@ -200,3 +202,104 @@ def margins(g: float, delay: int, dt: float, req: Requirement) -> Margins:
         meets_gain=bool(gm_db >= req.gain_margin_db),
         meets_phase=bool(pm_deg is not None and pm_deg >= req.phase_margin_deg),
         meets_delay=bool(dm >= req.delay_margin_steps * dt))
+
+
+@dataclass(frozen=True)
+class RequirementFix:
+    """One change of the loop and whether every mode then meets the requirement (eq. 35), at
+    the run's plant and delay: the theory of a fix, to be flown before it is called one."""
+
+    change: str  # the spec field and the value it takes
+    value: float | None  # that value (None: the integrator or the gains, or none suffices)
+    gains: dict[str, float]  # the damping gains cut, by block (empty: no cut)
+    meets: bool
+    worst_mode: str  # the mode of least gain margin after the change
+    gain_margin_db: float
+    phase_margin_deg: float | None
+    delay_margin_s: float
+    steps_per_s: float  # cost: control steps per second of mission
+
+
+def _meets_fast(g: float, delay: int, req: Requirement) -> bool:
+    """Whether a mode's loop meets ``req``: the closed forms of GM and PM, and stability with
+    the required further delay (the delay margin's test at its one point)."""
+    gm, _ = gain_margin(g, delay)
+    pm, _ = phase_margin(g, delay)
+    total = delay + req.delay_margin_steps
+    n = int(np.floor(total))
+    return bool(20 * np.log10(gm) >= req.gain_margin_db and pm is not None
+                and np.degrees(pm) >= req.phase_margin_deg
+                and abs(dominant_root(g, n, total - n)) < UNIT)
+
+
+def _all_meet(mus: np.ndarray, dt: float, integrator: str, delay: int,
+              req: Requirement) -> bool:
+    # Every margin of eq. 35 falls as g grows, and g grows with μ: the fastest mode decides.
+    return _meets_fast(loop_gain(dt * float(np.max(mus)), integrator), delay, req)
+
+
+def _bisect_largest(ok, lo: float, hi: float, rtol: float = 1e-9) -> float | None:
+    """The largest x in [lo, hi] with ok(x), ok falling from true to false once; None if not
+    ok(lo)."""
+    if ok(hi):
+        return hi
+    if not ok(lo):
+        return None
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ok(mid) else (lo, mid)
+    return lo
+
+
+def _fix(change: str, value: float | None, M: np.ndarray, D: np.ndarray, dt: float,
+         integrator: str, delay: int, req: Requirement,
+         gains: dict[str, float] | None = None) -> RequirementFix:
+    # Every margin of eq. 35 falls as g grows: the fastest mode has the least of each, and
+    # every mode meets the requirement exactly when it does.
+    fastest = damping_modes(M, D)[0]
+    m = margins(loop_gain(dt * fastest.mu, integrator), delay, dt, req)
+    return RequirementFix(change=change, value=value, gains=gains or {}, meets=m.meets,
+                          worst_mode=fastest.name, gain_margin_db=m.gain_margin_db,
+                          phase_margin_deg=m.phase_margin_deg,
+                          delay_margin_s=m.delay_margin_s, steps_per_s=1.0 / dt)
+
+
+def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
+                      delay: int, req: Requirement) -> list[RequirementFix]:
+    """The loop as it is, and three changes against the requirement at its plant and delay
+    (eq. 35): the implicit damping at this step; the largest step at which every mode meets
+    it; the damping gains cut, block by block, to the largest at which every mode that block
+    sets (its largest share) meets it."""
+    def mus(D: np.ndarray) -> np.ndarray:
+        return np.array([m.mu for m in damping_modes(M_breve, D)])
+
+    base = mus(D_breve)
+    out = [_fix("as flown", None, M_breve, D_breve, dt, integrator, delay, req)]
+    if integrator == "explicit":
+        out.append(_fix("controller.integrator: imex", None, M_breve, D_breve, dt, "imex",
+                        delay, req))
+    dt_ok = _bisect_largest(lambda h: _all_meet(base, h, integrator, delay, req), 1e-6, dt)
+    out.append(_fix(f"mission.dt ≤ {dt_ok:.4g} s" if dt_ok else "mission.dt: none suffices",
+                    dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req))
+    D, cuts = D_breve.copy(), {}
+    for b, block in enumerate(GAIN_BLOCKS):
+        def block_meets(d: float, b: int = b, D: np.ndarray = D) -> bool:
+            return all(_meets_fast(loop_gain(dt * m.mu, integrator), delay, req)
+                       for m in damping_modes(M_breve, with_gain(D, b, d)) if m.block == b)
+
+        now = float(D[3 * b, 3 * b])
+        if block_meets(now):
+            continue
+        # The spec's damping gains are positive: the search stops a millionth above zero.
+        d_ok = _bisect_largest(block_meets, 1e-6 * now, now)
+        if d_ok is None:
+            cuts = {}
+            break
+        D, cuts[block] = with_gain(D, b, d_ok), d_ok
+    words = ", ".join(f"{k}.D ≤ {v:.4g}" for k, v in cuts.items())
+    out.append(_fix(f"controller.gains: {words}" if cuts else
+                    "controller.gains: as they are" if out[0].meets else
+                    "controller.gains: no cut of the damping gains suffices",
+                    None, M_breve, D if cuts else D_breve, dt, integrator, delay, req,
+                    gains=cuts))
+    return out
