@@ -41,6 +41,18 @@ def test_lag1_columns_match_scalar_definition(rng):
             np.dot(d[:-1], d[1:]) / np.dot(d, d), rel=1e-12)
 
 
+def test_a_series_without_motion_has_no_lag1():
+    """A constant column (zero, or a value whose mean rounds: 0.1 repeated) has no lag-1: its
+    spread is round-off. A ripple of 1e-12 on a unit offset is motion (1e-12 ≫ 64 ulps of 1)
+    and is judged: period-2 reads −1."""
+    k = np.arange(200)
+    x = np.c_[np.zeros(200), np.full(200, 0.1), 1.0 + 1e-12 * (-1.0) ** k]
+    r = signals.lag1_or_none(x)
+    assert r[0] is None and r[1] is None
+    assert r[2] == pytest.approx(-1.0, abs=0.02)
+    assert signals.lag1_or_none(np.full(50, -3.7)) == [None]
+
+
 def test_velocity_jump_and_alignment():
     v = np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 4.0]])
     assert signals.velocity_jumps(v).tolist() == [5.0, 0.0]

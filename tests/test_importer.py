@@ -304,6 +304,122 @@ def test_bad_inputs_are_one_line_errors(nominal, tmp_path):
         import_log(good, _mapping(time=None, dt=0.03), "x", tmp_path / "logs", resample_dt=0.01)
 
 
+def _damaged(kind: str, cols: dict, d: Path) -> Path:
+    """A file of one class of damage, written by the libraries that write such files."""
+    import io
+    import zipfile
+
+    t, q, v = cols["t"][:20], cols["q"][:20], cols["v"][:20]
+    if kind == "empty_csv":
+        (p := d / "empty.csv").write_bytes(b"")
+    elif kind == "header_only_csv":
+        (p := d / "header.csv").write_text("t,q0,q1\n")
+    elif kind == "empty_npz":
+        (p := d / "empty.npz").write_bytes(b"")
+    elif kind == "random_npz":
+        (p := d / "random.npz").write_bytes(np.random.default_rng(0).bytes(300))
+    elif kind == "truncated_npz":
+        np.savez(full := d / "full.npz", t=t, q=q, v=v)
+        (p := d / "truncated.npz").write_bytes(full.read_bytes()[:full.stat().st_size // 2])
+    elif kind == "no_arrays_npz":
+        np.savez(p := d / "none.npz")
+    elif kind == "lying_header_npz":  # a header claiming 10^11 rows over 64 bytes
+        head = io.BytesIO()
+        np.lib.format.write_array_header_1_0(head, {"descr": "<f8", "fortran_order": False,
+                                                    "shape": (10**11, 13)})
+        with zipfile.ZipFile(p := d / "lying.npz", "w") as z:
+            for key in ("t", "q", "v"):
+                z.writestr(f"{key}.npy", head.getvalue() + bytes(64))
+    elif kind == "empty_parquet":
+        pq.write_table(pa.table({"t": pa.array([], pa.float64()),
+                                 "q": pa.array([], pa.list_(pa.float64())),
+                                 "v": pa.array([], pa.list_(pa.float64()))}),
+                       p := d / "empty.parquet")
+    return p
+
+
+@pytest.mark.parametrize("kind,needle", [
+    ("empty_csv", "empty: no header and no rows"),
+    ("header_only_csv", "no rows (a header of 3 columns only)"),
+    ("empty_npz", "not a .npz file (not a zip archive"),
+    ("random_npz", "not a .npz file (not a zip archive"),
+    ("truncated_npz", "not a .npz file (not a zip archive"),
+    ("no_arrays_npz", "the archive holds no arrays"),
+    ("lying_header_npz", "its header claims shape (100000000000, 13)"),
+    ("empty_parquet", "empty.parquet: no rows"),
+])
+def test_an_empty_or_damaged_file_is_refused_as_such(nominal, tmp_path, kind, needle):
+    cols, _ = nominal
+    src = _damaged(kind, cols, tmp_path)
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        import_log(src, _mapping(), "x", tmp_path / "logs")
+    assert not (tmp_path / "logs").exists()
+
+
+def test_a_damaged_file_is_one_line_exit_2_from_the_command(nominal, tmp_path):
+    cols, _ = nominal
+    r = run_cli("import", _damaged("truncated_npz", cols, tmp_path), "--robot", "short_nominal",
+                "--out", tmp_path / "logs")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "Traceback" not in r.stderr and "truncated.npz" in r.stderr
+
+
+def test_a_file_over_the_memory_budget_is_refused_before_it_is_read(nominal, tmp_path,
+                                                                      monkeypatch):
+    cols, _ = nominal
+    src = _written(tmp_path, cols["q"], cols["v"], cols["t"])
+    data = sum(pq.ParquetFile(src).metadata.row_group(i).total_byte_size
+               for i in range(pq.ParquetFile(src).metadata.num_row_groups))
+    # A budget of 5 copies of the data: under the 12 the import needs at its peak.
+    monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", repr(5 * data / 2**30))
+    with pytest.raises(SpecError, match=r"importing it needs about 12× that, over the memory "
+                                        r"budget .*BREVE_MEMORY_BUDGET_GB"):
+        import_log(src, _mapping(), "x", tmp_path / "logs")
+    monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", repr(13 * data / 2**30))
+    import_log(src, _mapping(), "x", tmp_path / "logs")
+
+
+def test_a_missing_attribute_is_named_with_what_the_object_holds(nominal, tmp_path):
+    from types import SimpleNamespace
+
+    cols, _ = nominal
+    src = tmp_path / "ns.npz"
+    ns = SimpleNamespace(t=cols["t"][:20], x=np.c_[cols["q"][:20], cols["v"][:20]])
+    np.savez(src, states=np.array(ns, dtype=object))
+    with pytest.raises(SpecError, match=re.escape("no 'q' in key 'states' (it holds attributes "
+                                                  "t (shape (20,)), x (shape (20, 25)))")):
+        import_log(src, _mapping(allow_pickle=True, q="states.q", v="states.v",
+                                 time="states.t"), "x", tmp_path / "logs")
+
+
+def test_a_log_without_motion_is_undetermined_and_its_record_strict_json(nominal, tmp_path):
+    """The robot held at rest for 200 steps: no statistic of shape is a verdict. The lag-1s
+    are null (undetermined), the record parses as strict JSON (no NaN token), the summary
+    says so, and a claim on the lag-1 does not hold."""
+    from pipeline.analysis.summary import imported_lines
+    from pipeline.claims.evaluate import compare_values
+
+    cols, _ = nominal
+    q = np.tile(cols["q"][0], (200, 1))
+    src = _written(tmp_path, q, np.zeros((200, 12)), 0.03 * np.arange(200))
+    done = import_log(src, _mapping(), "still", tmp_path / "logs")
+    rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
+    assert rec.dominant.lag1 is None and rec.bus_rate.lag1 is None
+    assert rec.dominant.step_energy_share is None
+    assert all(d.lag1 is None for d in rec.directions)
+    text = (tmp_path / "rep" / "imported" / "still" / "analysis.json").read_text()
+
+    def no_constant(name: str):
+        raise AssertionError(f"{name} in analysis.json")
+
+    assert json.loads(text, parse_constant=no_constant)["dominant"]["lag1"] is None
+    assert "lag-1 undetermined (no motion)" in imported_lines(rec, Path("x"))[0]
+    assert not compare_values("lt", rec.dominant.lag1, -0.5)
+    assert not compare_values("gt", rec.dominant.lag1, -0.5)
+    assert all(m.agrees is None for m in rec.prediction.modes)
+    assert rec.prediction.undetermined == len(rec.prediction.modes) and not rec.prediction.agrees
+
+
 def test_an_imported_log_whose_import_record_is_damaged_is_refused(nominal, tmp_path):
     cols, _ = nominal
     done = import_log(_written(tmp_path, cols["q"], cols["v"], cols["t"]), _mapping(), "x",

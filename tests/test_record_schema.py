@@ -43,7 +43,7 @@ def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
     path = write_analysis(typed, tmp_path)
     text = path.read_text()
     back = read_analysis(path)
-    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/6"
+    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/7"
     assert check_record(json.loads(text)) is None
     # The same record, field by field, with the two fields the writer sets.
     assert back == dataclasses.replace(typed, schema=back.schema,
@@ -139,9 +139,10 @@ def test_the_off_schema_record_is_never_written(typed, tmp_path):
 
 
 def test_paths_name_fields_by_the_schema_and_read_by_value_at(typed):
-    assert field_type("dominant.lag1") is float
+    assert field_type("dominant.lag1") == float | None  # undetermined without motion
     assert field_type("theory.fastest_mode.axis") is int
-    assert field_type("directions.-1.lag1") is float
+    assert field_type("directions.-1.lag1") == float | None
+    assert field_type("directions.-1.sigma") is float
     assert field_type("modes_along.share.any mode name") is float  # keyed by the data
     assert field_type("divergence.growth_factor", DivergedRecord) is float
     for bad in ("dominant.lag2", "theory.mu_max.x", "directions.last.lag1", "divergence.ratio"):

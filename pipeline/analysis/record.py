@@ -39,8 +39,10 @@ from pipeline.errors import LogError
 # /4: harm (the actuators' torque reversals and the bus attitude jitter, eqs. 30–32) and
 # modes_along (the fastest damping mode named along the whole log, eq. 21); /6: a ring's growth
 # (sustained or decaying), a held cycle checked against its estimate (HeldBy.explains) and the
-# modes' stability checked against the map's (Prediction.theory_consistent).
-SCHEMA = "breve-analysis/6"
+# modes' stability checked against the map's (Prediction.theory_consistent); /7: a lag-1 and
+# the dominant step-energy share may be null, undetermined (a series without motion); the
+# record holds no NaN (it is written as strict JSON).
+SCHEMA = "breve-analysis/7"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
 
@@ -64,7 +66,7 @@ def write_analysis(record: AnalysisRecord, out_dir: Path) -> Path:
     table = _table_bytes(record) if getattr(record, "directions", None) else None
     digest = hashlib.sha256(table).hexdigest() if table is not None else None
     record = dataclasses.replace(record, schema=SCHEMA, directions_sha256=digest)
-    text = json.dumps(to_json(record), indent=1, allow_nan=True) + "\n"
+    text = json.dumps(to_json(record), indent=1, allow_nan=False) + "\n"
     problem = check_record(json.loads(text))
     if problem is not None:  # the analysis code's own error: never written, never read back
         raise ValueError(f"analysis record of {record.spec_name} off its schema: {problem}")

@@ -1,4 +1,4 @@
-"""The analysis record (``analysis.json``, schema ``breve-analysis/6``): its typed structure,
+"""The analysis record (``analysis.json``, schema ``breve-analysis/7``): its typed structure,
 its one serialisation, and the check of a record read from disk.
 
 The record is a tree of frozen dataclasses (:class:`CompleteRecord` for a complete log,
@@ -60,16 +60,16 @@ class Direction:
     sigma: float
     rms: float
     step_rms: float
-    lag1: float
+    lag1: float | None  # None: undetermined, the series holds no motion above its round-off
 
 
 @dataclass(frozen=True)
 class Dominant:
     index: int
     sigma: float
-    lag1: float
+    lag1: float | None
     step_rms: float
-    step_energy_share: float
+    step_energy_share: float | None  # None: no step-to-step motion in any direction
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ class VelocityJump:
 class BusRateData:
     """The bus rate's statistics from the data alone (eq. 25)."""
 
-    lag1: float
+    lag1: float | None
     std: float
     step_rms: float
     alternating_rms: float

@@ -21,6 +21,22 @@ def lag1_autocorrelation(x: np.ndarray) -> np.ndarray:
         return num / den
 
 
+def holds_motion(x: np.ndarray) -> np.ndarray:
+    """Whether a series varies by more than its floats' round-off, along axis 0: its spread
+    above 64 ulps of its largest magnitude. Below it a lag-1 (or any shape statistic) is the
+    round-off's, not the motion's: undetermined, never a verdict."""
+    x = np.asarray(x, dtype=float)
+    return x.std(axis=0) > 64 * np.finfo(float).eps * np.abs(x).max(axis=0, initial=0.0)
+
+
+def lag1_or_none(x: np.ndarray) -> list[float | None]:
+    """Each column's lag-1 (eq. 25), or None where the column holds no motion
+    (:func:`holds_motion`); a 1-D series gives a list of one."""
+    x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    r, moving = lag1_autocorrelation(x), holds_motion(x)
+    return [float(v) if m else None for v, m in zip(r, moving, strict=True)]
+
+
 def rms(x: np.ndarray) -> np.ndarray:
     """Root mean square along axis 0."""
     x = np.asarray(x, dtype=float)

@@ -178,19 +178,20 @@ def direction_stages(robot: GiordanoRobot, log: VerifiedLog, win: Window, check:
     if bad.size:
         raise CheckFailed(f"{log.path}: the per-direction projection is not finite at step "
                           f"{win.start + int(bad[0])} (Γ's SVD failed there)")
-    lag1 = signals.lag1_autocorrelation(y)
+    lag1 = signals.lag1_or_none(y)
     srms = signals.step_rms(y)
     dom = int(np.argmax(srms))
     directions = [
         rs.Direction(direction=i, sigma=float(np.median(sigma[:, i])),
                      rms=float(signals.rms(y[:, i])), step_rms=float(srms[i]),
-                     lag1=float(lag1[i]))
+                     lag1=lag1[i])
         for i in range(y.shape[1])
     ]
     top = directions[dom]
+    energy = float(np.sum(srms**2))
     return prov, directions, rs.Dominant(
         index=dom, sigma=top.sigma, lag1=top.lag1, step_rms=top.step_rms,
-        step_energy_share=float(srms[dom] ** 2 / np.sum(srms**2))), nu_breve
+        step_energy_share=float(srms[dom] ** 2 / energy) if energy > 0 else None), nu_breve
 
 
 def fastest_mode_record(fixes: ModeFixes) -> rs.FastestMode:
@@ -407,7 +408,7 @@ def bus_rate_data(w_b: np.ndarray) -> rs.BusRateData:
     x = w_b @ signals.dominant_step_direction(w_b)
     alt = (x[:-2] - 2 * x[1:-1] + x[2:]) / 4
     steps = np.linalg.norm(np.diff(w_b, axis=0), axis=1)
-    return rs.BusRateData(lag1=float(signals.lag1_autocorrelation(x)), std=float(x.std()),
+    return rs.BusRateData(lag1=signals.lag1_or_none(x)[0], std=float(x.std()),
                           step_rms=float(signals.step_rms(x)),
                           alternating_rms=float(signals.rms(alt)),
                           step_median=float(np.median(steps)))
@@ -516,8 +517,8 @@ def compare(a: rs.CompleteRecord, b: rs.CompleteRecord) -> rs.Comparison:
     la, lb = a.dominant.lag1, b.dominant.lag1
     return rs.Comparison(
         against=b.spec_name, against_log=b.log,
-        # NaN flips nothing: the sign of an undefined lag-1 is no evidence.
-        lag1_flip=bool(np.isfinite(la) and np.isfinite(lb) and np.sign(la) != np.sign(lb)),
+        # An undetermined lag-1 flips nothing: the sign of no motion is no evidence.
+        lag1_flip=la is not None and lb is not None and bool(np.sign(la) != np.sign(lb)),
         amplitude_ratio=a.velocity_jump.median / b.velocity_jump.median,
         coverage_diff_pp=100 * abs(a.metrics.coverage_final - b.metrics.coverage_final),
         table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}

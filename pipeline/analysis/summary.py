@@ -55,7 +55,7 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
                 f"{g.fit_steps[1]}, Φ predicts {g.predicted:+.4g} (simulator's order; "
                 f"{g.predicted_note_order:+.4g} under the note's) -> {path}"]
     th, dom = record.theory, record.dominant
-    lines = [f"{record.spec_name}: dominant lag-1 {dom.lag1:+.3f} (σ {dom.sigma:.3g}), "
+    lines = [f"{record.spec_name}: dominant lag-1 {_lag(dom.lag1)} (σ {dom.sigma:.3g}), "
              f"dt·μ_max {th.dt_mu_max:.3g}, dt*_damping {th.dt_star_damping:.4g} s, "
              f"dt*_map {_num(th.dt_star_map)} s, dominant eigenvalue "
              f"{th.eig_dominant.real:+.3f}{th.eig_dominant.imag:+.3f}j, "
@@ -76,8 +76,8 @@ def imported_lines(record: ImportedRecord, path: Path) -> list[str]:
     """An imported log's headline numbers, its origin, and which stages ran and why."""
     o, dom = record.origin, record.dominant
     lines = [f"{record.spec_name} (imported {o.format} {o.source}, sha256 "
-             f"{o.source_sha256[:12]}): dominant lag-1 {dom.lag1:+.3f} (σ {dom.sigma:.3g}), "
-             f"bus rate lag-1 {record.bus_rate.lag1:+.3f}, median ‖Δv‖ "
+             f"{o.source_sha256[:12]}): dominant lag-1 {_lag(dom.lag1)} (σ {dom.sigma:.3g}), "
+             f"bus rate lag-1 {_lag(record.bus_rate.lag1)}, median ‖Δv‖ "
              f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
              f"{record.provenance.max_abs_s_min_G:.1e}, σ_min(Γ) ≥ "
              f"{record.conditioning.s_min_G_min:.3g} -> {path}"]
@@ -89,6 +89,10 @@ def imported_lines(record: ImportedRecord, path: Path) -> list[str]:
     lines += [f"  not run: {s.stage}: {s.why.removeprefix('not run: ')}"
               for s in record.stages if not s.ran]
     return lines
+
+
+def _lag(r: float | None) -> str:
+    return "undetermined (no motion)" if r is None else f"{r:+.3f}"
 
 
 def _margins(m: ModeLoop) -> str:

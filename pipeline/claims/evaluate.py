@@ -23,6 +23,7 @@ from pipeline.artefact_paths import IMPORTED_FOLDER, log_path
 from pipeline.claims.record import CheckEval, ClaimEval, read_claims_json, write_claims_json
 from pipeline.claims.register import (
     LOG_GROUPS,
+    NUMERIC_OPS,
     OPERATORS,
     ClaimsFile,
     load_claims,
@@ -225,9 +226,12 @@ class Context:
 
 
 def compare_values(op: str, value: Any, threshold: Any, rel_tol: float | None = None) -> bool:
-    """Whether ``value op threshold`` holds; NaN never holds. ``close``: |value − threshold| ≤
+    """Whether ``value op threshold`` holds; NaN never holds, nor does a number the data left
+    undetermined (None: a lag-1 of a series without motion). ``close``: |value − threshold| ≤
     rel_tol·|threshold|."""
     fn = OPERATORS[op][0]
+    if op in NUMERIC_OPS and (value is None or threshold is None):
+        return False
     if op in ("eq", "ne"):
         return bool(fn(value, threshold))
     for x, what in ((value, "measured value"), (threshold, "threshold")):

@@ -20,10 +20,15 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.budget import Budget
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import TIME_UNITS, ImportMapping
 
 NQ, NV = 13, 12
+# The import's peak memory over the size of the data it reads: measured 11x for a binary log
+# (docs/importing.md, "Size and memory"); a CSV's text is larger than its numbers, so the same
+# factor over its file size is conservative.
+IMPORT_COPIES = 12
 
 
 @dataclass(frozen=True)
@@ -95,11 +100,16 @@ def _vector(source: Path, field: str, spec: str | list[str], width: int, get) ->
 
 
 def read_csv(source: Path, mapping: ImportMapping) -> RawLog:
+    check_size(source, source.stat().st_size)
     try:
         df = pd.read_csv(source, dtype=str, skipinitialspace=True, keep_default_na=False)
+    except pd.errors.EmptyDataError:
+        raise SpecError(f"{source}: empty: no header and no rows") from None
     except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise SpecError(f"{source}: not a readable CSV file ({str(exc).splitlines()[0]})"
                         ) from None
+    if df.empty:
+        raise SpecError(f"{source}: no rows (a header of {len(df.columns)} columns only)")
 
     def get(name: str) -> np.ndarray:
         if name not in df.columns:
@@ -132,6 +142,16 @@ def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
 
 
 def read_parquet(source: Path, mapping: ImportMapping) -> RawLog:
+    try:
+        meta = pq.ParquetFile(source).metadata
+    except (OSError, pa.ArrowInvalid) as exc:
+        raise SpecError(f"{source}: not a readable Parquet file ({str(exc).splitlines()[0]})"
+                        ) from None
+    # The uncompressed size from the footer, before a row is read.
+    check_size(source, sum(meta.row_group(i).total_byte_size
+                           for i in range(meta.num_row_groups)), "decompressed")
+    if meta.num_rows == 0:
+        raise SpecError(f"{source}: no rows")
     try:
         table = pq.read_table(source)
     except (OSError, pa.ArrowInvalid) as exc:
@@ -178,10 +198,39 @@ def _finite_stamps(source: Path, name: str, t: np.ndarray) -> np.ndarray:
     return t
 
 
+def _npz_members(source: Path) -> dict[str, zipfile.ZipInfo]:
+    """The archive's members by key, each checked from its header before anything is read:
+    an archive that is not a whole zip is refused as such (numpy would try it as a pickle and
+    say so), and a member whose header claims more than the budget, or more than the member
+    holds, is refused before it is decompressed."""
+    if not zipfile.is_zipfile(source):
+        raise SpecError(f"{source}: not a .npz file (not a zip archive: empty, truncated or "
+                        f"another format)")
+    try:
+        with zipfile.ZipFile(source) as z:
+            infos = {i.filename.removesuffix(".npy"): i for i in z.infolist()}
+            check_size(source, sum(i.file_size for i in infos.values()), "decompressed")
+            for key, info in infos.items():
+                with z.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    shape, _, dtype = (np.lib.format.read_array_header_1_0(f) if version ==
+                                       (1, 0) else np.lib.format.read_array_header_2_0(f))
+                claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if not dtype.hasobject and claimed > info.file_size:
+                    raise SpecError(f"{source}: key {key!r}: its header claims shape {shape} "
+                                    f"({claimed:,} bytes), the member holds {info.file_size:,}: "
+                                    f"damaged")
+    except (zipfile.BadZipFile, ValueError, EOFError, OSError) as exc:
+        raise SpecError(f"{source}: not a readable .npz file ({str(exc).splitlines()[0]})"
+                        ) from None
+    return infos
+
+
 def read_npz(source: Path, mapping: ImportMapping) -> RawLog:
+    _npz_members(source)
     try:
         archive = np.load(source, allow_pickle=mapping.allow_pickle)
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise SpecError(f"{source}: not a readable .npz file ({str(exc).splitlines()[0]})"
                         ) from None
     with archive:
@@ -190,7 +239,9 @@ def read_npz(source: Path, mapping: ImportMapping) -> RawLog:
         def get(path: str) -> Any:
             key, *rest = path.split(".")
             if key not in archive.files:
-                raise SpecError(f"{source}: no key {key!r} (keys: {', '.join(archive.files)})")
+                raise SpecError(f"{source}: no key {key!r} (" + (
+                    f"keys: {', '.join(archive.files)})" if archive.files else
+                    "the archive holds no arrays)"))
             if key not in cache:
                 try:
                     cache[key] = archive[key]
@@ -207,11 +258,39 @@ def read_npz(source: Path, mapping: ImportMapping) -> RawLog:
                 elif hasattr(node, part):
                     node = getattr(node, part)
                 else:
-                    raise SpecError(f"{source}: {path}: no {part!r} in key {key!r}")
+                    raise SpecError(f"{source}: {path}: no {part!r} in key {key!r} (it holds "
+                                    f"{_holds(node)})")
             return node
 
         return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
                       _vector(source, "v", mapping.v, NV, get))
+
+
+def _holds(node: Any) -> str:
+    """What an object read from a file holds, for a message: its keys or attributes, each with
+    its shape (an array's) or type."""
+    if isinstance(node, np.ndarray):
+        return f"an array of shape {node.shape}"
+    items = node if isinstance(node, dict) else getattr(node, "__dict__", None)
+    if not isinstance(items, dict):
+        return f"a {type(node).__name__}"
+
+    def what(x: Any) -> str:
+        return f"shape {np.shape(x)}" if isinstance(x, (np.ndarray, list)) else type(x).__name__
+
+    kind = "keys" if isinstance(node, dict) else "attributes"
+    return f"{kind} " + ", ".join(f"{k} ({what(x)})" for k, x in list(items.items())[:20])
+
+
+def check_size(source: Path, nbytes: int, what: str = "") -> None:
+    """Refuse a file whose data would not fit the memory budget of ``run`` (pipeline.budget),
+    before it is read: the import holds about IMPORT_COPIES copies of the data at its peak
+    (measured, docs/importing.md)."""
+    budget = Budget.from_environment().memory_bytes
+    if nbytes * IMPORT_COPIES > budget:
+        raise SpecError(f"{source}: {nbytes / 2**20:,.0f} MiB {what + ' ' if what else ''}of "
+                        f"data; importing it needs about {IMPORT_COPIES}× that, over the memory "
+                        f"budget of {budget / 2**30:.3g} GiB (BREVE_MEMORY_BUDGET_GB)")
 
 
 READERS = {"csv": read_csv, "parquet": read_parquet, "npz": read_npz}

@@ -246,7 +246,7 @@ def lag1_directions(runs: list[RunData], path: Path,
     grid = np.full((len(runs), n_dir), np.nan)
     for j, r in enumerate(runs):
         d = r.record.directions
-        grid[j, :len(d)] = [e.lag1 for e in d]
+        grid[j, :len(d)] = [np.nan if e.lag1 is None else e.lag1 for e in d]
     fig, ax = plt.subplots(figsize=(9, 1.2 + 0.42 * len(runs)), layout="constrained")
     im = ax.imshow(grid, cmap="RdBu", vmin=-1.0, vmax=1.0, aspect="auto")
     for j, r in enumerate(runs):

@@ -166,7 +166,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     names = (rec.spec_name, other.spec_name)
     rows = [{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
             for r in comp.table]
-    flipped = sum(d.lag1 > LAG1_SMOOTH for d in other.directions)
+    flipped = sum(d.lag1 is not None and d.lag1 > LAG1_SMOOTH for d in other.directions)
     limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
     table = note_rows(rec, other, claims)

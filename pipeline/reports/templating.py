@@ -25,8 +25,11 @@ def _autoescape(name: str | None) -> bool:
 
 
 def num(x, digits: int = 4) -> str:
-    """A number with ``digits`` significant digits; booleans and text as they are."""
-    if isinstance(x, bool) or x is None:
+    """A number with ``digits`` significant digits; booleans and text as they are; None (a
+    number the data could not determine) as "undetermined"."""
+    if x is None:
+        return "undetermined"
+    if isinstance(x, bool):
         return str(x)
     if isinstance(x, int):
         return str(x)

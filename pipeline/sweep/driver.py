@@ -259,6 +259,8 @@ def sweep_command(args: argparse.Namespace) -> int:
     print(f"sweep {sweep.name}: {time.perf_counter() - t0:.1f} s wall "
           f"({session.startup_s:.1f} s to the first worker)")
     failed = df[df["status"] != "complete"]
+    for point in failed["point"]:  # a point whose last worker was killed mid-write
+        clear_unheld(sweep.log_dir / point)
     if len(failed):
         names = "; ".join(f"{r.point} ({r.error})" for r in failed.itertuples())
         raise RunFailed(f"sweep {sweep.name}: {len(failed)} of {len(df)} points failed: {names}")
