@@ -67,6 +67,35 @@ class LogMeta:
         return self.spec["name"]
 
 
+# An imported log's own hashes (JSON {"table", "record"}): the SHA-256 of its columns' values
+# and of its pipeline.import text, checked on every read. A simulated log needs none: the spec
+# it records makes it again, bitwise; an imported one cannot be made again without its source.
+IMPORT_HASH_KEY = "pipeline.import_sha256"
+
+
+class TableDigest:
+    """SHA-256 of a table's values, column by column in name order, each column's values as
+    little-endian bytes in row order (a list column's flattened): the same for the table as
+    written and as read back row group by row group, whatever the chunking."""
+
+    def __init__(self, names: list[str]):
+        self._h = {n: hashlib.sha256() for n in sorted(names)}
+
+    def update(self, table: pa.Table) -> None:
+        for name, h in self._h.items():
+            for chunk in table.column(name).chunks:
+                listed = pa.types.is_list(chunk.type) or pa.types.is_fixed_size_list(chunk.type)
+                values = chunk.flatten() if listed else chunk
+                x = values.to_numpy(zero_copy_only=False)
+                h.update(np.ascontiguousarray(x, dtype=x.dtype.newbyteorder("<")).tobytes())
+
+    def hexdigest(self) -> str:
+        top = hashlib.sha256()
+        for name, h in self._h.items():
+            top.update(name.encode() + b"\0" + h.digest())
+        return top.hexdigest()
+
+
 def _arrow_column(values: np.ndarray) -> pa.Array:
     values = np.ascontiguousarray(values)
     if values.ndim == 1:
@@ -76,9 +105,17 @@ def _arrow_column(values: np.ndarray) -> pa.Array:
 
 
 def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
-    """Write columns (1-D, or 2-D as fixed-size lists) and metadata to Parquet, atomically."""
+    """Write columns (1-D, or 2-D as fixed-size lists) and metadata to Parquet, atomically.
+    An imported log's metadata gets its own hashes (IMPORT_HASH_KEY) of these columns and of
+    its import record."""
     path = Path(path)
     table = pa.table({k: _arrow_column(v) for k, v in columns.items()})
+    if "pipeline.import" in metadata:
+        digest = TableDigest(table.column_names)
+        digest.update(table)
+        metadata = metadata | {IMPORT_HASH_KEY: json.dumps({
+            "table": digest.hexdigest(),
+            "record": hashlib.sha256(metadata["pipeline.import"].encode()).hexdigest()})}
     table = table.replace_schema_metadata({k.encode(): v.encode() for k, v in metadata.items()})
     tmp = atomic_target(path)
     try:
@@ -405,12 +442,17 @@ def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
     meta = _meta(path, pf)
     spec = _verified_spec(path, meta, pf.metadata.num_rows)
     spec._robot_path = _recorded_robot(path, meta, spec, digest)
+    hashes = _import_hashes(path, pf) if meta.imported is not None else None
+    table = TableDigest(pf.schema_arrow.names) if hashes is not None else None
     try:
-        _check_rows(path, pf, spec.mission.dt)
+        _check_rows(path, pf, spec.mission.dt, table)
     except (OSError, pa.ArrowException) as exc:  # a data page that does not decode
         raise _damaged(path, "data", f"a row group does not read "
                        f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
                        ) from None
+    if table is not None and table.hexdigest() != hashes["table"]:
+        raise _damaged(path, IMPORT_HASH_KEY, "the columns' values are not the ones the "
+                       "import wrote (changed after the import)")
     return VerifiedLog(path, meta, spec, sha, pf.metadata.num_rows, pf)
 
 
@@ -478,13 +520,35 @@ def _recorded_robot(path: Path, meta: LogMeta, spec: Spec,
                    f"with (its hash differs from pipeline.robot_hash)")
 
 
-def _check_rows(path: Path, pf: pq.ParquetFile, dt: float) -> None:
-    """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group."""
+def _import_hashes(path: Path, pf: pq.ParquetFile) -> dict:
+    """An imported log's own hashes, the import record's checked against its text."""
+    md = {k.decode(): v.decode() for k, v in (pf.schema_arrow.metadata or {}).items()}
+    try:
+        hashes = json.loads(md[IMPORT_HASH_KEY])
+        table, record = hashes["table"], hashes["record"]
+    except (KeyError, TypeError, json.JSONDecodeError):
+        raise _damaged(path, IMPORT_HASH_KEY, "an imported log without its own hashes "
+                       "(written before imports carried them, or edited): import it again"
+                       ) from None
+    if not (isinstance(table, str) and isinstance(record, str)):
+        raise _damaged(path, IMPORT_HASH_KEY, "not two hashes")
+    if hashlib.sha256(md["pipeline.import"].encode()).hexdigest() != record:
+        raise _damaged(path, "metadata key pipeline.import", "the import record is not the "
+                       "one the import wrote (edited after the import)")
+    return hashes
+
+
+def _check_rows(path: Path, pf: pq.ParquetFile, dt: float, digest: TableDigest | None = None
+                ) -> None:
+    """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group; each
+    row group into ``digest`` when given (an imported log's table hash)."""
     names = pf.schema_arrow.names
     _check_columns(path, pf, ["step", "t"])
     offset = 0
     for rg in range(pf.num_row_groups):
         t = pf.read_row_group(rg)
+        if digest is not None:
+            digest.update(t)
         k = np.arange(offset, offset + t.num_rows)
         step = t.column("step").to_numpy()
         bad = np.flatnonzero(step != k)

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.analysis.schema import ImportedRecord
 from pipeline.analysis.stages import analyze_log
-from pipeline.errors import LogError, SpecError
+from pipeline.errors import LogDamaged, LogError, SpecError
 from pipeline.importer.conventions import Conventions
 from pipeline.importer.mapping import load_mapping
 from pipeline.importer.run import import_log
@@ -429,6 +429,36 @@ def test_an_imported_log_whose_import_record_is_damaged_is_refused(nominal, tmp_
     md[b"pipeline.import"] = b"{}"
     pq.write_table(table.replace_schema_metadata(md), done.path)
     with pytest.raises(LogError, match=r"metadata key pipeline\.import: no 'source'"):
+        verify_log(done.path)
+
+
+@pytest.mark.parametrize("edit", ["a velocity", "the time resolution", "the hashes removed"])
+def test_an_imported_log_changed_after_the_import_is_refused(nominal, tmp_path, edit):
+    """The values and the import record are hashed at the import and checked on every read;
+    the same values rewritten in other row groups are the same log."""
+    cols, _ = nominal
+    done = import_log(_written(tmp_path, cols["q"], cols["v"], cols["t"]), _mapping(), "x",
+                      tmp_path / "logs")
+    table = pq.read_table(done.path)
+    md = dict(table.schema.metadata)
+    pq.write_table(table, regrouped := tmp_path / "regrouped.parquet", row_group_size=37)
+    verify_log(regrouped)
+    if edit == "a velocity":
+        v = table.column("v").to_pylist()
+        v[5][0] += 1e-9
+        table = table.set_column(table.column_names.index("v"), "v",
+                                 pa.array(v, table.schema.field("v").type))
+        needle = "the columns' values are not the ones the import wrote"
+    elif edit == "the time resolution":
+        record = json.loads(md[b"pipeline.import"])
+        record["time"]["resolution"] = 0.5
+        md[b"pipeline.import"] = json.dumps(record, sort_keys=True).encode()
+        needle = "the import record is not the one the import wrote"
+    else:
+        del md[b"pipeline.import_sha256"]
+        needle = "an imported log without its own hashes"
+    pq.write_table(table.replace_schema_metadata(md), done.path)
+    with pytest.raises(LogDamaged, match=re.escape(needle)):
         verify_log(done.path)
 
 
