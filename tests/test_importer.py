@@ -300,6 +300,11 @@ def test_bad_inputs_are_one_line_errors(nominal, tmp_path):
         with pytest.raises(SpecError, match="a log's name is letters"):
             import_log(good, _mapping(), name, tmp_path / "logs")
     assert not (tmp_path / "x").exists()
+    with pytest.raises(SpecError, match="300 characters, a log's name is at most 100"):
+        import_log(good, _mapping(), "a" * 300, tmp_path / "logs")
+    (not_a_folder := tmp_path / "a_file").write_text("")
+    r = run_cli("import", good, "--robot", "short_nominal", "--out", not_a_folder)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Not a directory" in r.stderr
     with pytest.raises(SpecError, match="no time stamps to resample"):
         import_log(good, _mapping(time=None, dt=0.03), "x", tmp_path / "logs", resample_dt=0.01)
 

@@ -88,6 +88,9 @@ def _stamps(raw_t: np.ndarray | None, mapping: ImportMapping, n: int, source: Pa
     return np.arange(n) * mapping.dt, 0.0
 
 
+MAX_NAME = 100
+
+
 def import_log(source: Path | str, mapping: ImportMapping, name: str,
                logs: Path | str = "logs", resample_dt: float | None = None,
                here: Path | None = None) -> ImportOutcome:
@@ -97,6 +100,9 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
     if not NAME.fullmatch(name) or name.startswith("."):
         raise SpecError(f"--name {name!r}: a log's name is letters, digits, '_', '-' and '.' "
                         f"(not first), so its folder stays under imported/")
+    if len(name) > MAX_NAME:  # a folder name: most file systems stop at 255 bytes
+        raise SpecError(f"--name {name[:20]}…: {len(name)} characters, a log's name is at most "
+                        f"{MAX_NAME}")
     fmt = mapping.source_format(source)
     robot, robot_from, robot_here = robot_block(mapping, here)
     # The robot's model, for the reader (a bag's joints by name) and the checks; its step
@@ -164,7 +170,6 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
     columns = {"step": np.arange(n, dtype=np.int64), "t": np.arange(n) * time.dt, "q": q,
                "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)}}
     path = imported_log_path(logs, name)
-    path.parent.mkdir(parents=True, exist_ok=True)
     write_table(path, columns, log_metadata(meta))
     return ImportOutcome(path, n, time, check, robot_from)
 
