@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from pipeline.errors import PipelineError
@@ -65,8 +66,8 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
 
 def _cmd_import(a: argparse.Namespace) -> int:
     from pipeline.importer.mapping import load_mapping
-    from pipeline.importer.run import import_log
     from pipeline.paths import display_path
+    from pipeline.store.door import import_log
 
     def columns(text: str | None) -> str | list[str] | None:
         return None if text is None else (text.split(",") if "," in text else text)
@@ -84,14 +85,18 @@ def _cmd_import(a: argparse.Namespace) -> int:
     source = Path(a.source)
     name = a.name or (source.stem if source.suffix else source.name)
     done = import_log(source, mapping, name, a.out, a.resample,
-                      mapping_file.resolve().parent if mapping_file else None)
-    r = done.check.declared.residuals
+                      mapping_file.resolve().parent if mapping_file else None, force=a.force)
+    if done.reused:
+        print(f"{name}: up to date ({done.rows} rows: the same source, mapping, robot and "
+              f"importer as the log there; --force imports it again) -> "
+              f"{display_path(done.path)}")
+        return 0
     tb = done.time
     resampled = (f", resampled from {tb.resampled_from} rows" if tb.resampled_from else
                  f", stamps within {tb.max_deviation:.2g} s of t0 + k·dt")
     print(f"{name}: {done.rows} rows at dt {tb.dt:.6g} s{resampled}; robot from {done.robot};"
-          f" q and v agree ({done.check.declared.conventions.describe()}: median residual "
-          f"{r.median_ratio:.2g}× its bound) -> {display_path(done.path)}")
+          f" q and v agree ({done.conventions}: median residual "
+          f"{done.median_ratio:.2g}× its bound) -> {display_path(done.path)}")
     return 0
 
 
@@ -374,6 +379,10 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument("--out", default="logs", metavar="DIR",
                     help="log folder; writes DIR/imported/<name>/run.parquet (default: logs; "
                     "e.g. --out /tmp/logs)")
+    im.add_argument("--force", action="store_true",
+                    help="replace a log already imported under the name from another source, "
+                    "mapping or robot, or import the same again (default: off: the same "
+                    "import is reused, another refused; e.g. --force)")
     im.set_defaults(func=_cmd_import)
 
     rp = _stage(sub, "report", "render the figures, reports and index.html of a report folder",
@@ -453,12 +462,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from pipeline.orphans import watch_from_environment
+
+    watch_from_environment()  # a command another started in the background ends with it
     args = build_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except PipelineError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    # Python's warnings are collected (the filters stay as they are: a test's "error" still
+    # raises): an error is then its one line, the warnings its bad input raised on the way
+    # being symptoms of it; after a success each is one line, never a multi-line dump.
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            code = args.func(args)
+        except PipelineError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:
+            print("interrupted", file=sys.stderr)
+            return 130
+    for line in dict.fromkeys(_warning_line(w) for w in caught):
+        print(line, file=sys.stderr)
+    return code
+
+
+def _warning_line(w: warnings.WarningMessage) -> str:
+    where = f"{Path(w.filename).name}:{w.lineno}"
+    text = " ".join(str(w.message).split())
+    return f"warning: {w.category.__name__}: {text} ({where})"

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
 import queue
 import sys
 import time
@@ -51,6 +52,7 @@ from pathlib import Path
 
 from pipeline.errors import RunFailed
 from pipeline.log_layout import ROW_SIZE
+from pipeline.orphans import exit_with_parent
 from pipeline.paths import display_path
 from pipeline.progress import interactive, say, stage
 
@@ -323,9 +325,10 @@ def next_unit(done: set[str], taken: set[str]) -> str | None:
     return None
 
 
-def _worker(tasks, report) -> None:
+def _worker(tasks, report, parent: int) -> None:
     """Compile the units named on ``tasks`` until it says None; ``report`` gets (unit,
-    seconds, "") or (unit, None, message)."""
+    seconds, "") or (unit, None, message). Ends with the process ``parent`` (kill -9 too)."""
+    exit_with_parent(parent)
     while (name := tasks.get()) is not None:
         t0 = time.perf_counter()
         try:
@@ -386,7 +389,8 @@ def _schedule(processes: int, when_idle: Callable[[], None] | None = None) -> No
     ctx = mp.get_context("spawn")
     report = ctx.Queue()
     tasks = [ctx.Queue() for _ in range(processes)]
-    procs = [ctx.Process(target=_worker, args=(q, report), daemon=True) for q in tasks]
+    procs = [ctx.Process(target=_worker, args=(q, report, os.getpid()), daemon=True)
+             for q in tasks]
     for p in procs:
         p.start()
     done: set[str] = set()

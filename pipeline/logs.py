@@ -33,8 +33,8 @@ META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "st
 # numeric column of a log must be finite.
 MAY_BE_INFINITE = ("kappa_G", "kappa_J")
 # What an imported log's pipeline.import record holds (pipeline/importer/run.py writes it).
-IMPORT_KEYS = ("source", "source_sha256", "format", "mapping", "robot_from", "conventions",
-               "time", "quat_norm_error", "consistency")
+IMPORT_KEYS = ("source", "source_sha256", "format", "mapping", "robot_from", "import_key",
+               "conventions", "time", "quat_norm_error", "consistency")
 ROW_GROUP = 65_536
 
 

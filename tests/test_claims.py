@@ -145,6 +145,29 @@ def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
     assert "up to date" in run_cli("claims", "--claims", path, "--out", out).stderr
 
 
+def test_a_hand_edited_analysis_is_not_believed_by_the_claims(tmp_path):
+    """An analysis.json whose number is edited (still whole, well-typed JSON) is made again
+    from its log: the claim reads the analysis' value, never the edit (issue 36, item 2)."""
+    b = built()
+    logs = tmp_path / "logs"
+    for name in ("t_nominal", "t_dt010"):
+        shutil.copytree(b.logs / name, logs / name)
+    path = claims_file(tmp_path, [claim("R4", "nominal:dominant.lag1", "lt", -0.5)], logs=logs)
+    out = tmp_path / "out"
+    first = run_cli("claims", "--claims", path, "--out", out)
+    assert first.returncode == 0, first.stderr
+    target = out / "t_nominal" / "analysis.json"
+    record = json.loads(target.read_text())
+    measured = record["dominant"]["lag1"]
+    record["dominant"]["lag1"] = 0.99  # would fail R4
+    target.write_text(json.dumps(record, indent=1))
+    r = run_cli("claims", "--claims", path, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "analysis t_nominal" in r.stderr  # analysed again, not reused
+    assert r.stdout == first.stdout
+    assert json.loads(target.read_text())["dominant"]["lag1"] == measured
+
+
 def test_the_claims_key_follows_the_specs_the_register_finds(tmp_path):
     """A spec of the same name put beside the register is the one an evaluation would run:
     the key's sources change with it (and with the register's content)."""

@@ -15,6 +15,7 @@ from report_fixtures import write_spec
 
 from pipeline.budget import ROW_FLOATS
 from pipeline.cli import build_parser, main
+from pipeline.errors import SpecError
 from pipeline.paths import PROJECT_ROOT
 from pipeline.spec import load_spec
 
@@ -196,3 +197,32 @@ def test_a_reader_that_goes_away_ends_the_command_without_a_traceback():
     err = p.stderr.read()
     assert p.wait() == 1
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_warnings_never_make_an_error_more_than_its_line(monkeypatch, capsys):
+    """A RuntimeWarning raised on the way to a refusal is a symptom of the bad input: stderr is
+    the error's one line; after a success each warning is one line (issue 36, item 8)."""
+    import warnings
+
+    import pipeline.cli as cli
+
+    def refusing(a):
+        warnings.warn("overflow encountered in multiply\n  x = a * b", RuntimeWarning,
+                      stacklevel=1)
+        raise SpecError("bad.csv: field q: not numbers")
+
+    def passing(a):
+        warnings.warn("overflow encountered in multiply\n  x = a * b", RuntimeWarning,
+                      stacklevel=1)
+        return 0
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # as outside the tests (pytest makes them errors)
+        monkeypatch.setattr(cli, "_cmd_validate", refusing)
+        assert cli.main(["validate", "nominal"]) == 2
+        assert capsys.readouterr().err == "error: bad.csv: field q: not numbers\n"
+        monkeypatch.setattr(cli, "_cmd_validate", passing)
+        assert cli.main(["validate", "nominal"]) == 0
+        err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: RuntimeWarning: overflow encountered "
+                                               "in multiply x = a * b (test_cli.py:")

@@ -22,12 +22,11 @@ from pipeline.analysis.ringing import MIN_STEPS, ring
 from pipeline.analysis.stages import analyze_log
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import load_mapping
-from pipeline.importer.run import import_log
 from pipeline.logs import verify_log
 from pipeline.sim import margins as mg
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
-from pipeline.store.door import ArtefactStore
+from pipeline.store.door import ArtefactStore, import_log
 
 control = pytest.importorskip("control")
 

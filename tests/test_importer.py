@@ -27,10 +27,10 @@ from pipeline.analysis.stages import analyze_log
 from pipeline.errors import LogDamaged, LogError, SpecError
 from pipeline.importer.conventions import Conventions
 from pipeline.importer.mapping import load_mapping
-from pipeline.importer.run import import_log
 from pipeline.logs import verify_log
+from pipeline.paths import PROJECT_ROOT
 from pipeline.spec import load_spec
-from pipeline.store.door import ArtefactStore
+from pipeline.store.door import ArtefactStore, import_log
 
 JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
           "wrist_2_joint", "wrist_3_joint")
@@ -211,7 +211,9 @@ def test_a_log_in_degrees_declared_so_is_the_same_log(nominal, tmp_path):
     q, v = cols["q"].copy(), cols["v"].copy()
     q[:, 7:], v[:, 3:] = np.rad2deg(q[:, 7:]), np.rad2deg(v[:, 3:])
     src = _written(tmp_path, q, v, cols["t"])
-    with pytest.raises(SpecError, match="q and v disagree"):
+    # The joints' limits name it first (issue 36, item 7): the shoulder pan at 449° read as rad.
+    with pytest.raises(SpecError, match=r"joint shoulder_pan_joint .*degrees declared as "
+                                        r"radians\? --angle-unit deg"):
         import_log(src, _mapping(), "deg", tmp_path / "logs")
     done = import_log(src, _mapping(angle_unit="deg"), "deg", tmp_path / "logs")
     got = verify_log(done.path).columns(["q", "v"])
@@ -238,7 +240,8 @@ def test_stamps_jittered_beyond_their_resolution_are_refused(nominal, tmp_path):
     cols, _ = nominal
     t = cols["t"] + np.where(np.arange(len(cols["t"])) == 50, 1e-6, 0.0)
     src = _written(tmp_path, cols["q"], cols["v"], t)
-    with pytest.raises(SpecError, match=r"uneven time base: row 50 is \+1e-06 s off"):
+    with pytest.raises(SpecError, match=r"x\.parquet: uneven time base: jitter: row 50 is "
+                                        r"\+1e-06 s off t0 \+ k·dt, beyond the stamps'"):
         import_log(src, _mapping(), "jitter", tmp_path / "logs")
 
 
@@ -646,6 +649,14 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     assert "Imported logs" in index and "imported parquet" in index
     page = (out / "imported" / "flight" / "imported.md").read_text()
     assert "**Origin: imported** from" in page and "| 4 the discrete map Φ (eq. 22) | no |" in page
+    assert "log is gone" not in page
+    # The log deleted: the report is not "up to date"; the page and the index flag it.
+    (logs / "imported" / "flight" / "run.parquet").unlink()
+    r = run_cli("report", "--out", out, timeout=600)
+    assert r.returncode == 0 and "up to date" not in r.stderr, r.stderr
+    page = (out / "imported" / "flight" / "imported.md").read_text()
+    assert "**Its log is gone, damaged or not the one analysed**" in page
+    assert "(its log is gone or changed)" in (out / "index.html").read_text()
     # A spec or log path of an imported run is refused when the register is loaded.
     register["claims"][0]["checks"][0]["metric"] = "flight:spec.mission.dt"
     path.write_text(json.dumps(register))
@@ -655,6 +666,21 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     path.write_text(json.dumps(register))
     r = run_cli("claims", "--claims", path, "--out", out)
     assert r.returncode == 2 and "an imported log is analysed alone" in r.stderr
+
+
+def test_the_docs_example_register_runs_as_written(nominal, tmp_path):
+    """docs/importing.md's register, taken from the page as it is, evaluated on a log imported
+    under the name it uses (issue 36, item 8: it was refused as written, no ``expect:``)."""
+    cols, _ = nominal
+    page = (PROJECT_ROOT / "docs" / "importing.md").read_text()
+    section = page[page.index("## In the claims and the reports"):]
+    block = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
+    (tmp_path / "claims.yaml").write_text(block)
+    import_log(_written(tmp_path, cols["q"], cols["v"], cols["t"]), _mapping(), "flight",
+               tmp_path / "logs")
+    r = run_cli("claims", "--claims", "claims.yaml", cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"F1 PASS", r.stdout), r.stdout
 
 
 def test_exact_stamps_keep_their_own_resolution_and_rounded_ones_theirs(nominal, tmp_path):
@@ -690,3 +716,97 @@ def test_a_run_of_a_register_that_extends_another_replaces_it_whole(tmp_path):
         {"extends": "parent.yaml", "runs": {"flight": {"imported": "b"}}}))
     cf = load_claims(tmp_path / "child.yaml")
     assert cf.runs["flight"].imported == "b" and cf.runs["flight"].controller is None
+
+
+# -- what the robot file and the numbers allow (issue 36, item 7) -----------------------------
+
+def test_one_joint_in_degrees_in_q_and_v_is_refused_naming_the_joint_and_unit(nominal,
+                                                                               tmp_path):
+    """The elbow logged in degrees in both q and v: still one motion (eq. 33 cannot tell),
+    but −98.8 "rad" is far outside the file's [−2.44, 2.09]: refused, naming the unit."""
+    cols, _ = nominal
+    q, v = cols["q"].copy(), cols["v"].copy()
+    q[:, 9], v[:, 8] = np.rad2deg(q[:, 9]), np.rad2deg(v[:, 8])  # elbow_joint
+    with pytest.raises(SpecError, match=r"q: joint elbow_joint is -?\d+\.?\d* rad on row 0, "
+                                        r"outside the robot file's limits \[-2\.44, 2\.09\] "
+                                        r"rad by more than 1 rad \(degrees declared as radians"):
+        import_log(_written(tmp_path, q, v, cols["t"]), _mapping(), "deg1", tmp_path / "logs")
+    assert not (tmp_path / "logs" / "imported" / "deg1").exists()
+
+
+@pytest.mark.parametrize("kind,needle", [
+    ("complex", "q (q): complex numbers (complex128)"),
+    ("bool", "v (v): booleans, not numbers"),
+    ("strings", "q (q): not numbers"),
+    ("complex_t", "time (t): complex numbers"),
+])
+def test_complex_boolean_or_text_arrays_are_refused(nominal, tmp_path, kind, needle):
+    cols, _ = nominal
+    arrays = {"t": cols["t"], "q": cols["q"], "v": cols["v"]}
+    if kind == "complex":
+        arrays["q"] = cols["q"] + 1e-3j
+    elif kind == "bool":
+        arrays["v"] = cols["v"] > 0
+    elif kind == "strings":
+        arrays["q"] = cols["q"].astype(str)
+    else:
+        arrays["t"] = cols["t"] + 0j
+    src = tmp_path / f"{kind}.npz"
+    np.savez(src, **arrays)
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        import_log(src, _mapping(), "x", tmp_path / "logs")
+
+
+@pytest.mark.parametrize("dtype,start", [("uint64", 2**63 + 12_345), ("uint64", 2**63 - 10**10),
+                                         ("uint64", 2**64 - 10**12),
+                                         ("int64", -(10**18)), ("uint32", 7), ("int16", -3)])
+def test_integer_stamps_of_any_width_are_read_exactly(nominal, tmp_path, dtype, start):
+    """Integer stamps from their type's top to its bottom: the step, the rows and the data
+    stages are those of the same log stamped in seconds (a uint64 at or above 2⁶³ used to wrap
+    to a negative time)."""
+    cols, original = nominal
+    n = len(cols["t"])
+    tick = {"uint64": 30_000_000, "int64": 30_000_000, "uint32": 30, "int16": 30}[dtype]
+    unit = {"uint64": "ns", "int64": "ns", "uint32": "ms", "int16": "ms"}[dtype]
+    if dtype == "int16":
+        n = 300  # int16 holds −3 + 299·30 = 8967
+    stamps = np.array([start + k * tick for k in range(n)], dtype=object).astype(dtype)
+    assert int(stamps[-1]) - int(stamps[0]) == (n - 1) * tick  # no wrap in the fixture
+    src = tmp_path / "ints.parquet"
+    pq.write_table(pa.table({"t": pa.array(stamps), "q": list(cols["q"][:n]),
+                             "v": list(cols["v"][:n])}), src)
+    done = import_log(src, _mapping(time_unit=unit), "ints", tmp_path / "logs")
+    assert done.rows == n and done.time.dt == pytest.approx(0.03, rel=1e-9)
+    if n == len(cols["t"]):
+        _same_data_stages(_analyse(done.path, tmp_path / "rep"), original)
+
+
+# -- messages (issue 36, item 8) --------------------------------------------------------------
+
+def test_a_scale_error_below_four_digits_is_printed_with_the_digits_that_show_it(nominal,
+                                                                                 tmp_path):
+    """Joint rates 1.00001 times too large: refused, and the message says 1.00001 and
+    0.99999, not "1 times … sum to 1, not 1"."""
+    cols, _ = nominal
+    v = cols["v"].copy()
+    v[:, 6:] *= 1.00001
+    with pytest.raises(SpecError, match=r"the joint rates: 1\.00001 times what q's motion says "
+                                        r"\(the weights in the step sum to 0\.99999, not 1, by "
+                                        r"1e-05 where the fit explains"):
+        import_log(_written(tmp_path, cols["q"], v, cols["t"]), _mapping(), "s",
+                   tmp_path / "logs")
+
+
+@pytest.mark.parametrize("dt,needle", [
+    (1e-9, "GiB, over the memory budget"),  # 3e10 rows: 223 GiB were allocated before
+    (1e3, "--resample 1000: the log's 29.97 s give 1 row(s) at that step; an analysis needs "
+          "at least 3"),
+])
+def test_resampling_to_an_extreme_step_is_refused_before_anything_is_allocated(nominal, tmp_path,
+                                                                               dt, needle):
+    cols, _ = nominal
+    keep = np.r_[0:200, 201:len(cols["t"])]
+    src = _written(tmp_path, cols["q"][keep], cols["v"][keep], cols["t"][keep])
+    with pytest.raises(SpecError, match=re.escape(needle)):
+        import_log(src, _mapping(), "r", tmp_path / "logs", resample_dt=dt)
+    assert not (tmp_path / "logs" / "imported" / "r").exists()

@@ -74,7 +74,7 @@ def test_the_cycle_finder_finds_a_cycle():
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
     ("errors", "atomic_files", "paths", "artefact_paths", "log_layout", "yamlfile", "version",
-     "progress", "provenance", "platform"),
+     "progress", "provenance", "platform", "orphans"),
     ("spec", "budget"),
     ("logs",),
     ("sim", "importer"),

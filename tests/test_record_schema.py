@@ -35,7 +35,8 @@ def typed(short_logs) -> CompleteRecord:
 @pytest.fixture()
 def record(typed) -> dict:
     """The record as JSON, as it is written (with the fields only a written record has)."""
-    return {**to_json(typed), "schema": "s", "directions_sha256": "0" * 64}
+    return {**to_json(typed), "schema": "s", "record_sha256": "0" * 64,
+            "directions_sha256": "0" * 64}
 
 
 def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
@@ -43,12 +44,13 @@ def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
     path = write_analysis(typed, tmp_path)
     text = path.read_text()
     back = read_analysis(path)
-    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/7"
+    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/8"
     assert check_record(json.loads(text)) is None
-    # The same record, field by field, with the two fields the writer sets.
+    # The same record, field by field, with the three fields the writer sets.
     assert back == dataclasses.replace(typed, schema=back.schema,
+                                       record_sha256=back.record_sha256,
                                        directions_sha256=back.directions_sha256)
-    assert back.directions_sha256 is not None
+    assert back.directions_sha256 is not None and back.record_sha256 is not None
     # One serialisation: the record read back and written again is the same text.
     again = write_analysis(back, tmp_path / "again")
     assert again.read_text() == text
@@ -57,7 +59,8 @@ def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
 def test_the_serialisation_keeps_field_order_and_leaves_out_only_absent_fields(typed):
     data = to_json(typed)
     assert list(data) == [f.name for f in dataclasses.fields(CompleteRecord)
-                          if f.name not in ("schema", "comparison", "directions_sha256")]
+                          if f.name not in ("schema", "record_sha256", "comparison",
+                                            "directions_sha256")]
     assert list(data["theory"])[-2:] == ["window_steps_below_floor", "at_or_above_floor"]
     # A theory outside a window has no window counts: absent, not null.
     bare = to_json(dataclasses.replace(typed.theory, window_steps_below_floor=None,

@@ -207,6 +207,11 @@ def _copy_reports(src: Path, dst: Path) -> Path:
                                             "-0.99"))), "key dominant.lag1: '-0.99' is not a"),
     (lambda p: p.write_text(json.dumps(_set(json.loads(p.read_text()), ("theory", "mu_max2"),
                                             1.0))), "key theory.mu_max2: not a field"),
+    # Whole and well-typed, but not what the analysis wrote: a number edited by hand.
+    (lambda p: p.write_text(json.dumps(_set(json.loads(p.read_text()), ("dominant", "lag1"),
+                                            0.99))), "key record_sha256: the record's content"),
+    (lambda p: p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items()
+                                        if k != "record_sha256"})), "key record_sha256: missing"),
     (lambda p: (p.parent / "directions.parquet").unlink(), "directions.parquet is missing"),
     (lambda p: (p.parent / "directions.parquet").write_bytes(b"PAR1 another table"),
      "key directions_sha256"),

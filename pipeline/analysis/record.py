@@ -7,7 +7,10 @@ refuses a version it does not know, a file that is not JSON, and a record missin
 holding one it should not or one of the wrong type. It also carries the
 SHA-256 of the ``directions.parquet`` written with it: the table is written first and the
 record last, so a record whose table is missing or is another run's is caught on reading
-(a writer killed between the two, a disk that filled up).
+(a writer killed between the two, a disk that filled up). And it carries the SHA-256 of its
+own content (``record_sha256``, over the canonical JSON of every other field): a record edited
+by hand after the analysis wrote it is refused on reading, by ``claims`` (which makes it again)
+and ``report`` (exit 2), never believed.
 """
 
 from __future__ import annotations
@@ -41,10 +44,21 @@ from pipeline.errors import LogError
 # (sustained or decaying), a held cycle checked against its estimate (HeldBy.explains) and the
 # modes' stability checked against the map's (Prediction.theory_consistent); /7: a lag-1 and
 # the dominant step-energy share may be null, undetermined (a series without motion); the
-# record holds no NaN (it is written as strict JSON).
-SCHEMA = "breve-analysis/7"
+# record holds no NaN (it is written as strict JSON); /8: record_sha256, the record's own content
+# hash, checked on reading.
+SCHEMA = "breve-analysis/8"
+CONTENT_KEY = "record_sha256"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE
+
+
+def content_digest(record: dict) -> str:
+    """SHA-256 of a record's canonical JSON (sorted keys, no spaces), its own hash left out: a
+    float reads back from JSON to the same value, so the digest of what was written is the
+    digest of what is read."""
+    body = {k: v for k, v in record.items() if k != CONTENT_KEY}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _table_bytes(record: CompleteRecord) -> bytes:
@@ -65,8 +79,11 @@ def write_analysis(record: AnalysisRecord, out_dir: Path) -> Path:
     table_path, path = folder / TABLE_NAME, folder / RECORD_NAME
     table = _table_bytes(record) if getattr(record, "directions", None) else None
     digest = hashlib.sha256(table).hexdigest() if table is not None else None
-    record = dataclasses.replace(record, schema=SCHEMA, directions_sha256=digest)
-    text = json.dumps(to_json(record), indent=1, allow_nan=False) + "\n"
+    record = dataclasses.replace(record, schema=SCHEMA, directions_sha256=digest,
+                                 record_sha256=None)
+    content = to_json(record)  # without record_sha256 (absent while None), then with it
+    content[CONTENT_KEY] = content_digest(content)
+    text = json.dumps(content, indent=1, allow_nan=False) + "\n"
     problem = check_record(json.loads(text))
     if problem is not None:  # the analysis code's own error: never written, never read back
         raise ValueError(f"analysis record of {record.spec_name} off its schema: {problem}")
@@ -100,6 +117,10 @@ def read_analysis(path: Path | str) -> AnalysisRecord:
     problem = check_record(record)  # every field of its kind, typed (analysis/schema.py)
     if problem is not None:
         raise LogError(f"{path}: key {problem} (not the analysis record {SCHEMA})")
+    # Whole and well-typed, but is it what the analysis wrote? Its own hash says.
+    if record[CONTENT_KEY] != content_digest(record):
+        raise LogError(f"{path}: key {CONTENT_KEY}: the record's content is not what the "
+                       f"analysis wrote (edited since?): analyse its log again")
     digest = record.get("directions_sha256")
     table = path.parent / TABLE_NAME
     if digest is not None:

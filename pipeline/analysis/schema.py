@@ -1,4 +1,4 @@
-"""The analysis record (``analysis.json``, schema ``breve-analysis/7``): its typed structure,
+"""The analysis record (``analysis.json``, schema ``breve-analysis/8``): its typed structure,
 its one serialisation, and the check of a record read from disk.
 
 The record is a tree of frozen dataclasses (:class:`CompleteRecord` for a complete log,
@@ -245,6 +245,9 @@ class Identity:
     written (:mod:`pipeline.analysis.record`), and absent from a compared run's record."""
 
     schema: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+    # The SHA-256 of the written record's other fields (pipeline.analysis.record): set when
+    # written, checked when read; absent from a compared run's record, like ``schema``.
+    record_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     spec_name: str
     log: str
     log_sha256: str
@@ -390,7 +393,8 @@ class ImportedRecord(Identity):
 
 
 AnalysisRecord = CompleteRecord | DivergedRecord | ImportedRecord
-WRITTEN_ONLY = ("schema", "directions_sha256")  # fields a written record always holds
+# The fields a written record always holds.
+WRITTEN_ONLY = ("schema", "record_sha256", "directions_sha256")
 
 
 def record_type(record: dict) -> type:

@@ -523,5 +523,6 @@ def compare(a: rs.CompleteRecord, b: rs.CompleteRecord) -> rs.Comparison:
         coverage_diff_pp=100 * abs(a.metrics.coverage_final - b.metrics.coverage_final),
         table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}
                for label, p in COMPARE_ROWS],
-        other=replace(b, schema=None, directions_sha256=None, comparison=None),
+        other=replace(b, schema=None, record_sha256=None, directions_sha256=None,
+                      comparison=None),
     )

@@ -117,13 +117,22 @@ class Residuals:
         factor = 1.0 / b.weight_sum if b.weight_sum else float("inf")
         same = all(abs(c.weight_sum - d.weight_sum) <= c.uncertainty + d.uncertainty
                    for c in self.blocks for d in self.blocks)
+        off_by = (f"{_off_one(factor)} times what q's motion says (the weights in the step "
+                  f"sum to {_off_one(b.weight_sum)}, not 1, by {b.deviation / b.rms:.2g} where "
+                  f"the fit explains {b.uncertainty:.2g})")
         if len(off) == len(self.blocks) and same:
-            return (f"every block of v is {factor:.4g} times what q's motion says (the "
-                    f"weights in the step sum to {b.weight_sum:.4g}, not 1): the time's unit "
-                    f"or the step? (--time-unit, --dt)")
-        return (f"{b.block}: {factor:.4g} times what q's motion says (its weights in "
-                f"the step sum to {b.weight_sum:.4g}, not 1): a unit or scale error? "
-                f"(--angle-unit, --length-unit)")
+            return (f"every block of v is {off_by}: the time's unit or the step? "
+                    f"(--time-unit, --dt)")
+        return f"{b.block}: {off_by}: a unit or scale error? (--angle-unit, --length-unit)"
+
+
+def _off_one(x: float) -> str:
+    """``x`` printed with the digits it takes to differ from 1 (4 at least): a weight sum of
+    0.99998 is not "1"."""
+    digits = 4
+    while digits < 17 and float(f"{x:.{digits}g}") == 1.0:
+        digits += 1
+    return f"{x:.{digits}g}"
 
 
 def step_twists(model: pin.Model, q: np.ndarray, dt: float | np.ndarray) -> np.ndarray:

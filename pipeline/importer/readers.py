@@ -9,7 +9,11 @@ tick of an integer stamp, the rounding of a float64 stamp (both ends of a differ
 
 from __future__ import annotations
 
+import hashlib
+import io
+import os
 import re
+import stat
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +33,35 @@ NQ, NV = 13, 12
 # (docs/importing.md, "Size and memory"); a CSV's text is larger than its numbers, so the same
 # factor over its file size is conservative.
 IMPORT_COPIES = 12
+
+
+@dataclass(frozen=True)
+class SourceBytes:
+    """A log file's bytes, read once: what is parsed and what is hashed are the same bytes
+    (a pipe's, or a file's that is replaced while the import runs)."""
+
+    path: Path  # for messages
+    data: bytes
+    sha256: str
+
+
+def read_bytes(source: Path) -> SourceBytes:
+    """The file's bytes and their SHA-256, refused over the memory budget before they are read
+    (a regular file, by its size) or as soon as they pass it (a pipe)."""
+    limit = int(Budget.from_environment().memory_bytes // IMPORT_COPIES)
+    try:
+        with open(source, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if stat.S_ISREG(st.st_mode):
+                check_size(source, st.st_size)
+            data = fh.read(limit + 1)
+    except IsADirectoryError:
+        raise SpecError(f"{source}: a folder, not a log file (a ROS 2 bag's folder is "
+                        f"--format rosbag)") from None
+    except OSError as exc:
+        raise SpecError(f"{source}: cannot read: {exc.strerror or exc}") from None
+    check_size(source, len(data))
+    return SourceBytes(source, data, hashlib.sha256(data).hexdigest())
 
 
 @dataclass(frozen=True)
@@ -79,7 +112,27 @@ def printed_resolution(text: np.ndarray) -> np.ndarray:
     return np.where(value > 0, 0.5 * 10.0 ** (exponent - digits.max() + 1), 0.0)
 
 
+def _real_numbers(source: Path, name: str, value: Any) -> np.ndarray:
+    """``value`` as an array, refused when it holds complex numbers (NumPy would drop their
+    imaginary parts with a warning), booleans (it would read them as 0 and 1) or text (it
+    would parse it: a binary log's numbers are numbers). A CSV's text is parsed by its own
+    reader before this."""
+    try:
+        x = np.asarray(value)
+    except (TypeError, ValueError):
+        raise SpecError(f"{source}: {name}: not numbers") from None
+    if np.iscomplexobj(x):
+        raise SpecError(f"{source}: {name}: complex numbers ({x.dtype}); a log's t, q and v "
+                        f"are real")
+    if x.dtype == bool:
+        raise SpecError(f"{source}: {name}: booleans, not numbers")
+    if x.dtype.kind in "USV":  # text or bytes in a binary format: not a number written
+        raise SpecError(f"{source}: {name}: not numbers ({x.dtype}: text or bytes)")
+    return x
+
+
 def _matrix(source: Path, name: str, value: Any, width: int) -> np.ndarray:
+    value = _real_numbers(source, name, value)
     try:
         x = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -99,10 +152,11 @@ def _vector(source: Path, field: str, spec: str | list[str], width: int, get) ->
                                                    for c in spec]), width)
 
 
-def read_csv(source: Path, mapping: ImportMapping) -> RawLog:
-    check_size(source, source.stat().st_size)
+def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+    source = src.path
     try:
-        df = pd.read_csv(source, dtype=str, skipinitialspace=True, keep_default_na=False)
+        df = pd.read_csv(io.BytesIO(src.data), dtype=str, skipinitialspace=True,
+                         keep_default_na=False)
     except pd.errors.EmptyDataError:
         raise SpecError(f"{source}: empty: no header and no rows") from None
     except (OSError, pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -141,19 +195,17 @@ def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
     return col.to_numpy()
 
 
-def read_parquet(source: Path, mapping: ImportMapping) -> RawLog:
+def read_parquet(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+    source = src.path
     try:
-        meta = pq.ParquetFile(source).metadata
-    except (OSError, pa.ArrowInvalid) as exc:
-        raise SpecError(f"{source}: not a readable Parquet file ({str(exc).splitlines()[0]})"
-                        ) from None
-    # The uncompressed size from the footer, before a row is read.
-    check_size(source, sum(meta.row_group(i).total_byte_size
-                           for i in range(meta.num_row_groups)), "decompressed")
-    if meta.num_rows == 0:
-        raise SpecError(f"{source}: no rows")
-    try:
-        table = pq.read_table(source)
+        pf = pq.ParquetFile(pa.BufferReader(src.data))
+        meta = pf.metadata
+        # The uncompressed size from the footer, before a row is read.
+        check_size(source, sum(meta.row_group(i).total_byte_size
+                               for i in range(meta.num_row_groups)), "decompressed")
+        if meta.num_rows == 0:
+            raise SpecError(f"{source}: no rows")
+        table = pf.read()
     except (OSError, pa.ArrowInvalid) as exc:
         raise SpecError(f"{source}: not a readable Parquet file ({str(exc).splitlines()[0]})"
                         ) from None
@@ -177,12 +229,16 @@ def _stamps(source: Path, mapping: ImportMapping, get) -> tuple[np.ndarray | Non
     """Time stamps in seconds and their resolution, from a binary column or key."""
     if mapping.time is None:
         return None, None
-    raw = np.asarray(get(mapping.time))
+    raw = _real_numbers(source, f"time ({mapping.time})", get(mapping.time))
     if raw.ndim != 1:
         raise SpecError(f"{source}: time ({mapping.time}): shape {raw.shape}, expected N")
     scale = TIME_UNITS[mapping.time_unit]
-    if np.issubdtype(raw.dtype, np.integer):
-        t = raw.astype(np.int64) * scale  # exact to the tick, then one rounding
+    if np.issubdtype(raw.dtype, np.integer) and len(raw):
+        # Exact to the tick, then one rounding: ticks counted from the earliest stamp in the
+        # stamps' own type (every difference is ≥ 0 and fits it: a uint64 at or above 2⁶³ cast
+        # to int64 would wrap to a negative time), as a bag's stamps are. An epoch in seconds
+        # would keep only ~2 µs at 10⁹ s; the log's t starts at 0 in any case.
+        t = (raw - raw.min()).astype(np.float64) * scale
         return t, 0.5 * scale + float_resolution(t, accumulated=False)
     try:
         t = _finite_stamps(source, mapping.time, raw.astype(float) * scale)
@@ -198,16 +254,17 @@ def _finite_stamps(source: Path, name: str, t: np.ndarray) -> np.ndarray:
     return t
 
 
-def _npz_members(source: Path) -> dict[str, zipfile.ZipInfo]:
-    """The archive's members by key, each checked from its header before anything is read:
-    an archive that is not a whole zip is refused as such (numpy would try it as a pickle and
-    say so), and a member whose header claims more than the budget, or more than the member
-    holds, is refused before it is decompressed."""
-    if not zipfile.is_zipfile(source):
+def _check_npz(src: SourceBytes) -> None:
+    """The archive checked from its zip directory and its members' headers before an array is
+    read: one that is not a whole zip is refused as such (numpy would try it as a pickle and
+    say so), one whose decompressed size is over the memory budget is refused, and so is a
+    member whose header claims more bytes than the member holds."""
+    source = src.path
+    if not zipfile.is_zipfile(io.BytesIO(src.data)):
         raise SpecError(f"{source}: not a .npz file (not a zip archive: empty, truncated or "
                         f"another format)")
     try:
-        with zipfile.ZipFile(source) as z:
+        with zipfile.ZipFile(io.BytesIO(src.data)) as z:
             infos = {i.filename.removesuffix(".npy"): i for i in z.infolist()}
             check_size(source, sum(i.file_size for i in infos.values()), "decompressed")
             for key, info in infos.items():
@@ -223,13 +280,13 @@ def _npz_members(source: Path) -> dict[str, zipfile.ZipInfo]:
     except (zipfile.BadZipFile, ValueError, EOFError, OSError) as exc:
         raise SpecError(f"{source}: not a readable .npz file ({str(exc).splitlines()[0]})"
                         ) from None
-    return infos
 
 
-def read_npz(source: Path, mapping: ImportMapping) -> RawLog:
-    _npz_members(source)
+def read_npz(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+    source = src.path
+    _check_npz(src)
     try:
-        archive = np.load(source, allow_pickle=mapping.allow_pickle)
+        archive = np.load(io.BytesIO(src.data), allow_pickle=mapping.allow_pickle)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise SpecError(f"{source}: not a readable .npz file ({str(exc).splitlines()[0]})"
                         ) from None

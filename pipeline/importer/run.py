@@ -6,7 +6,9 @@ describe one motion in the declared conventions and in no better one
 (:mod:`pipeline.importer.consistency`, eq. 33); convert to the project's conventions
 (:mod:`pipeline.importer.conventions`); check the time base, or resample on request
 (:mod:`pipeline.importer.timebase`); rebuild the conditioning columns from q with the
-robot's own kernels; write the log atomically.
+robot's own kernels; write the log atomically. The artefact store runs them under its rules
+(:meth:`pipeline.store.door.ArtefactStore.import_log`: one lock per name, the same import
+reused, another refused without ``--force``); the source's hash is of the bytes parsed.
 
 An imported log holds ``step``, ``t`` (k·dt), ``q``, ``v`` and the rebuilt σ columns
 (``s_min_G``, ``kappa_G``, ``s_min_J``, ``kappa_J``), never a controller's column: what the
@@ -17,6 +19,8 @@ format, the mapping, the conventions, the time base, the consistency check).
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,13 +30,20 @@ import numpy as np
 from pipeline import artefact_paths
 from pipeline.errors import SpecError
 from pipeline.importer.bags import read_bag
-from pipeline.importer.consistency import ConsistencyCheck, check_conventions
+from pipeline.importer.consistency import check_conventions
+from pipeline.importer.conventions import Conventions
 from pipeline.importer.mapping import ImportMapping
-from pipeline.importer.readers import READERS, RawLog
+from pipeline.importer.plausibility import check_joint_limits
+from pipeline.importer.readers import READERS, RawLog, read_bytes
 from pipeline.importer.timebase import TimeBase, even_time_base, resample
 from pipeline.logs import LogMeta, log_metadata, write_table
 from pipeline.paths import display_path
-from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
+from pipeline.provenance.keys import (
+    SIM_LIBRARIES,
+    file_digest,
+    import_version,
+    library_versions,
+)
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.spec import RobotSpec, Spec, build_spec, load_spec, spec_hash_of
 
@@ -43,11 +54,21 @@ SIGMA_COLUMNS = ("s_min_G", "kappa_G", "s_min_J", "kappa_J")
 
 @dataclass(frozen=True)
 class ImportOutcome:
+    """What an import wrote, or found already written (``reused``), as the CLI reports it."""
+
     path: Path
     rows: int
     time: TimeBase
-    check: ConsistencyCheck
+    conventions: str  # the declared conventions, described
+    median_ratio: float  # the consistency check's median residual over its bound (eq. 33)
     robot: str  # where the robot block came from
+    reused: bool = False
+
+    @classmethod
+    def of_record(cls, path: Path, rows: int, record: dict, reused: bool) -> ImportOutcome:
+        return cls(path, rows, TimeBase(**record["time"]),
+                   Conventions(**record["conventions"]).describe(),
+                   record["consistency"]["median_ratio"], record["robot_from"], reused)
 
 
 def imported_log_path(logs: Path | str, name: str) -> Path:
@@ -91,24 +112,93 @@ def _stamps(raw_t: np.ndarray | None, mapping: ImportMapping, n: int, source: Pa
 MAX_NAME = 100
 
 
-def import_log(source: Path | str, mapping: ImportMapping, name: str,
-               logs: Path | str = "logs", resample_dt: float | None = None,
-               here: Path | None = None) -> ImportOutcome:
-    """Import ``source`` as the log ``<logs>/imported/<name>/run.parquet``; ``here``: the
-    mapping file's folder (a robot file named in it is looked for there)."""
+@dataclass(frozen=True)
+class PreparedImport:
+    """A foreign log read and keyed, not yet checked or written (:func:`prepare_import`)."""
+
+    source: Path
+    name: str
+    fmt: str
+    mapping: ImportMapping
+    robot: RobotSpec
+    robot_from: str
+    robot_here: Path | None
+    model_robot: GiordanoRobot
+    raw: RawLog
+    source_sha256: str
+    resample_dt: float | None
+    key: str  # what the imported log is made from (:func:`import_key`)
+
+
+def prepare_import(source: Path | str, mapping: ImportMapping, name: str,
+                   resample_dt: float | None = None, here: Path | None = None
+                   ) -> PreparedImport:
+    """Read ``source`` as the mapping says and key what its import would be made from;
+    ``here``: the mapping file's folder (a robot file named in it is looked for there). The
+    artefact store decides whether to write it (:meth:`pipeline.store.door.ArtefactStore.
+    import_log`)."""
     source = Path(source)
+    check_name(name)
+    fmt = mapping.source_format(source)
+    robot, robot_from, robot_here = robot_block(mapping, here)
+    # The robot's model, for the reader (a bag's joints by name) and the checks; its step
+    # (here 1 s) is not the model's: the spec is made again with the log's below.
+    model_spec = import_spec(name, robot, 1.0, 1, robot_here, str(source))[0]
+    model_robot = GiordanoRobot(model_spec)
+    raw, source_sha256 = read_source(source, mapping, fmt, list(model_robot.model.names)[2:])
+    key = import_key(source_sha256, fmt, mapping, model_spec, resample_dt)
+    return PreparedImport(source, name, fmt, mapping, robot, robot_from, robot_here,
+                          model_robot, raw, source_sha256, resample_dt, key)
+
+
+def write_import(prep: PreparedImport, path: Path) -> ImportOutcome:
+    """Check, convert and write the prepared import as the log ``path`` (atomically)."""
+    time, q, v, record = _converted(prep.source, prep.raw, prep.mapping, prep.model_robot,
+                                    prep.resample_dt)
+    n = len(q)
+    spec, content = import_spec(prep.name, prep.robot, time.dt, n, prep.robot_here,
+                                str(prep.source))
+    sigma = np.array([_sigmas(prep.model_robot, qk) for qk in q])
+    record = {"source": display_path(prep.source.resolve()),
+              "source_sha256": prep.source_sha256, "format": prep.fmt,
+              "mapping": prep.mapping.record(), "robot_from": prep.robot_from,
+              "import_key": prep.key, **record}
+    meta = LogMeta(spec={"name": prep.name, **content}, spec_hash=spec_hash_of(content),
+                   sim_version=IMPORTED_VERSION, robot_file=display_path(spec.robot_path),
+                   robot_hash=file_digest(spec.robot_path), status="complete",
+                   failed_step=None, error="", rows=n,
+                   versions=library_versions(SIM_LIBRARIES), imported=record)
+    columns = {"step": np.arange(n, dtype=np.int64), "t": np.arange(n) * time.dt, "q": q,
+               "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)}}
+    write_table(path, columns, log_metadata(meta))
+    return ImportOutcome.of_record(path, n, record, reused=False)
+
+
+def check_name(name: str) -> None:
+    """SpecError unless ``name`` is a log's name that keeps its folder under imported/."""
     if not NAME.fullmatch(name) or name.startswith("."):
         raise SpecError(f"--name {name!r}: a log's name is letters, digits, '_', '-' and '.' "
                         f"(not first), so its folder stays under imported/")
     if len(name) > MAX_NAME:  # a folder name: most file systems stop at 255 bytes
         raise SpecError(f"--name {name[:20]}…: {len(name)} characters, a log's name is at most "
                         f"{MAX_NAME}")
-    fmt = mapping.source_format(source)
-    robot, robot_from, robot_here = robot_block(mapping, here)
-    # The robot's model, for the reader (a bag's joints by name) and the checks; its step
-    # (here 1 s) is not the model's: the spec is made again with the log's below.
-    model_robot = GiordanoRobot(import_spec(name, robot, 1.0, 1, robot_here, str(source))[0])
-    raw = read_source(source, mapping, fmt, list(model_robot.model.names)[2:])
+
+
+def import_key(source_sha256: str, fmt: str, mapping: ImportMapping, spec: Spec,
+               resample_dt: float | None) -> str:
+    """What an imported log is made from: the source's bytes, how they are read (format,
+    mapping), the robot (its block and file), the resampling and the importer's code."""
+    parts = {"source_sha256": source_sha256, "format": fmt, "mapping": mapping.record(),
+             "robot": spec.robot.model_dump(mode="json"),
+             "robot_file": file_digest(spec.robot_path), "resample": resample_dt,
+             "importer": import_version()}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()
+
+
+def _converted(source: Path, raw: RawLog, mapping: ImportMapping, model_robot: GiordanoRobot,
+               resample_dt: float | None) -> tuple[TimeBase, np.ndarray, np.ndarray, dict]:
+    """The log's time base, q and v in the project's conventions, and the import record's
+    account of the conventions, the time base and the consistency check (eq. 33)."""
     n = len(raw.q)
     if len(raw.v) != n or (raw.t is not None and len(raw.t) != n):
         raise SpecError(f"{source}: t, q and v have {len(raw.t) if raw.t is not None else n}, "
@@ -125,6 +215,9 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
 
     check, converted = check_conventions(model_robot.model, raw.q, raw.v,
                                          mapping.conventions, steps)
+    # Before the consistency verdict: a joint in degrees in both q and v is one motion still,
+    # and this names it where the check would name a symptom.
+    check_joint_limits(model_robot.model, converted.q, mapping.angle_unit, source)
     problem = check.problem()
     if problem is not None:
         raise SpecError(f"{source}: {problem}")
@@ -141,18 +234,11 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
         except SpecError:
             if resample_dt is None:
                 raise
-            time, q, v = resample(model_robot.model, t, q, v, resample_dt,
-                                      res)
+            time, q, v = resample(model_robot.model, t, q, v, resample_dt, res)
         else:
             if resample_dt is not None:
-                time, q, v = resample(model_robot.model, t, q, v, resample_dt,
-                                      res)
-    n = len(q)
-    spec, content = import_spec(name, robot, time.dt, n, robot_here, str(source))
-    sigma = np.array([_sigmas(model_robot, qk) for qk in q])
+                time, q, v = resample(model_robot.model, t, q, v, resample_dt, res)
     record = {
-        "source": display_path(source.resolve()), "source_sha256": _digest(source),
-        "format": fmt, "mapping": mapping.record(), "robot_from": robot_from,
         "conventions": mapping.conventions.__dict__, "time": time.record(),
         "quat_norm_error": converted.quat_norm_error,
         "consistency": {"median_ratio": check.declared.residuals.median_ratio,
@@ -162,26 +248,26 @@ def import_log(source: Path | str, mapping: ImportMapping, name: str,
                             a.conventions)[1]: a.residuals.median_ratio
                             for a in check.alternatives}},
     }
-    meta = LogMeta(spec={"name": name, **content}, spec_hash=spec_hash_of(content),
-                   sim_version=IMPORTED_VERSION, robot_file=display_path(spec.robot_path),
-                   robot_hash=file_digest(spec.robot_path), status="complete",
-                   failed_step=None, error="", rows=n,
-                   versions=library_versions(SIM_LIBRARIES), imported=record)
-    columns = {"step": np.arange(n, dtype=np.int64), "t": np.arange(n) * time.dt, "q": q,
-               "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)}}
-    path = imported_log_path(logs, name)
-    write_table(path, columns, log_metadata(meta))
-    return ImportOutcome(path, n, time, check, robot_from)
+    return time, q, v, record
 
 
-def read_source(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) -> RawLog:
+def read_source(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]
+                ) -> tuple[RawLog, str]:
     """The foreign log's t, q and v, read as the mapping says (a bag's reader matches the
-    arm's ``joints`` by name)."""
+    arm's ``joints`` by name), and the SHA-256 of the bytes they were read from: a file is
+    read once and parsed from those bytes; a bag (a folder, or an MCAP file its reader seeks
+    in) is hashed before and after it is read, and refused if it changed meanwhile."""
     if not source.exists():
         raise SpecError(f"{source}: file not found")
-    if fmt in ("rosbag", "mcap"):
-        return read_bag(source, mapping, fmt, joints)
-    return READERS[fmt](source, mapping)
+    if fmt not in ("rosbag", "mcap"):
+        src = read_bytes(source)
+        return READERS[fmt](src, mapping), src.sha256
+    before = _bag_digest(source)
+    raw = read_bag(source, mapping, fmt, joints)
+    if _bag_digest(source) != before:
+        raise SpecError(f"{source}: changed while it was read (its SHA-256 before and after "
+                        f"differ): import it again once it is written")
+    return raw, before
 
 
 def _sigmas(robot: GiordanoRobot, q: np.ndarray) -> tuple[float, float, float, float]:
@@ -190,13 +276,12 @@ def _sigmas(robot: GiordanoRobot, q: np.ndarray) -> tuple[float, float, float, f
     return T.s_min_G, T.kappa_G, T.s_min_J, T.kappa_J
 
 
-def _digest(path: Path) -> str:
-    if path.is_dir():  # a ROS 2 bag: its files, in name order
-        import hashlib
-
-        h = hashlib.sha256()
-        for f in sorted(p for p in path.rglob("*") if p.is_file()):
-            h.update(f.relative_to(path).as_posix().encode())
-            h.update(bytes.fromhex(file_digest(f)))
-        return h.hexdigest()
-    return file_digest(path)
+def _bag_digest(path: Path) -> str:
+    """A bag's SHA-256: an MCAP file's, or a bag folder's files', in name order."""
+    if not path.is_dir():
+        return file_digest(path)
+    h = hashlib.sha256()
+    for f in sorted(p for p in path.rglob("*") if p.is_file()):
+        h.update(f.relative_to(path).as_posix().encode())
+        h.update(bytes.fromhex(file_digest(f)))
+    return h.hexdigest()

@@ -18,7 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from pipeline.budget import Budget
 from pipeline.errors import SpecError
+from pipeline.importer.readers import IMPORT_COPIES
 
 GAP_STEPS = 1.5  # a step this many times dt or longer is rows missing, not jitter
 
@@ -62,9 +64,12 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> 
     odd = np.flatnonzero((gap > GAP_STEPS + slack) | (gap < 1 / GAP_STEPS - slack))
     if odd.size or np.any(dev > tol):
         k = int(np.argmax(dev > tol))
-        what = "a gap of" if odd.size and gap[odd[0]] > 1 else "a row too many: a step of"
-        detail = (f"{what} {gap[odd[0]]:.3g} steps before row {odd[0] + 1}" if odd.size
-                  else f"row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt")
+        if odd.size:
+            label = "a gap of" if gap[odd[0]] > 1 else "a row too many: a step of"
+            detail = f"{label} {gap[odd[0]]:.3g} steps before row {odd[0] + 1}"
+        else:  # no step out of range: the stamps wander, beyond their own resolution
+            detail = (f"jitter: row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt, "
+                      f"beyond the stamps' resolution")
         raise SpecError(f"{what}: uneven time base: {detail} (dt {dt:.6g} s, stamps written "
                         f"to {float(res.max()):.2g} s; steps from {steps.min():.6g} to "
                         f"{steps.max():.6g} s): give --resample DT to resample (recorded), "
@@ -81,7 +86,18 @@ def resample(model: pin.Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: 
     if np.any(np.diff(t) <= 0):
         raise SpecError("resample: time stamps not increasing")
     last = float(np.broadcast_to(np.asarray(resolution, dtype=float), t.shape)[-1])
-    grid = t[0] + np.arange(int((t[-1] - t[0] + last) // dt) + 1) * dt
+    rows = int((t[-1] - t[0] + last) // dt) + 1  # counted before anything is allocated
+    if rows < 3:
+        raise SpecError(f"--resample {dt:g}: the log's {t[-1] - t[0]:.6g} s give {rows} "
+                        f"row(s) at that step; an analysis needs at least 3")
+    need = rows * (q.shape[1] + v.shape[1]) * 8 * IMPORT_COPIES  # the import's copies of q, v
+    budget = Budget.from_environment().memory_bytes
+    if need > budget:
+        raise SpecError(f"--resample {dt:g}: {rows:,} rows ({t[-1] - t[0]:.6g} s at that step, "
+                        f"the log's own is {np.median(np.diff(t)):.3g} s) need about "
+                        f"{need / 2**30:.3g} GiB, over the memory budget of "
+                        f"{budget / 2**30:.3g} GiB (BREVE_MEMORY_BUDGET_GB)")
+    grid = t[0] + np.arange(rows) * dt
     grid = grid[grid <= t[-1] + last]
     j = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
     lam = np.clip((grid - t[j]) / (t[j + 1] - t[j]), 0.0, 1.0)

@@ -25,6 +25,8 @@ _DISTRIBUTION = {"pinocchio": "pin"}  # the distribution that provides the modul
 SIM_ENTRY = ("pipeline.sim.run",)
 ANALYSIS_ENTRY = ("pipeline.analysis.stages", "pipeline.analysis.record")
 REPORT_ENTRY = ("pipeline.reports.render",)
+IMPORT_ENTRY = ("pipeline.importer.run",)
+IMPORT_LIBRARIES = ("numpy", "scipy", "pinocchio", "numba", "pyarrow", "pandas", "rosbags")
 TEMPLATES = PACKAGE_DIR / "reports" / "templates"
 
 
@@ -106,6 +108,13 @@ def sim_version() -> str:
 def analysis_version() -> str:
     """The key of an analysis' code: the analysis' sources and the numerical libraries."""
     return _digest(source_closure(ANALYSIS_ENTRY), library_versions(ANALYSIS_LIBRARIES))
+
+
+@cache
+def import_version() -> str:
+    """The key of an imported log's code: the importer's sources and the libraries it reads
+    and checks with (an import made by other code is made again, not reused)."""
+    return _digest(source_closure(IMPORT_ENTRY), library_versions(IMPORT_LIBRARIES))
 
 
 @cache

@@ -12,6 +12,7 @@ current_report`: the same inputs, renderer and templates as last time; ``.report
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import sys
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -24,6 +25,7 @@ from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, IMPORTED_FOLDER
 from pipeline.atomic_files import atomic_write_text
 from pipeline.claims.record import KIND_NAMES, kind_counts, read_claims_json
 from pipeline.errors import LogError
+from pipeline.orphans import exit_with_parent
 from pipeline.provenance.keys import report_version
 from pipeline.reports import figures as fg
 from pipeline.reports.fixes import decisions, fix_tables
@@ -74,7 +76,8 @@ def render_imported(out: Path, runs: list[fg.RunData]) -> list[Path]:
     the data say, the declared controller's theory if any, and which stages ran and why."""
     written = []
     for r in runs:
-        ctx = {"rec": r.record, "o": r.record.origin, "code_version": report_version()}
+        ctx = {"rec": r.record, "o": r.record.origin, "code_version": report_version(),
+               "log_missing": r.log is None}
         written += [render("imported.md.j2", out / r.folder / "imported.md", **ctx),
                     render("imported.html.j2", out / r.folder / "imported.html", **ctx)]
     return written
@@ -261,7 +264,9 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     # The figures are drawn on two processes while this one checks the equations against the
     # code and renders the mechanism reports (matplotlib is most of the reports' time; a
     # figure is one task).
-    with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn")) as pool:
+    # Each figure process ends with this one, kill -9 included (pipeline.orphans).
+    with ProcessPoolExecutor(FIGURE_PROCESSES, mp_context=mp.get_context("spawn"),
+                             initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
         drawing = [(fig, pool.submit(fg.draw_or_why, draw, out / fig.file)) for fig, draw in jobs]
         cc = cross_check if cross_check is not None else build_cross_check()
         written = render_cross_check(out, cc) + render_imported(out, imported)

@@ -11,7 +11,12 @@ a report): logs under ``logs``, analyses under ``out``.
 - :meth:`~ArtefactStore.analysis`: the analysis record of a log, compared with a run of the
   same robot when asked, reused when made from those logs by this code
   (:func:`pipeline.store.validity.current_analysis`), else computed and written under the
-  folder's lock.
+  folder's lock;
+- :meth:`~ArtefactStore.import_log`: a foreign log imported under ``imported/<name>``, under
+  the name's lock: the same import reused (:func:`pipeline.store.validity.import_is_current`),
+  another refused unless forced.
+
+No artefact is written through a symbolic link out of its folder (``logs``, ``out``).
 
 A store keeps what it verified and hashed for its own life, one command: the files it hands
 out are its inputs, not expected to change under it. A file it writes replaces its entry.
@@ -28,15 +33,27 @@ from pipeline.analysis.imported import analyze_imported, controller_key
 from pipeline.analysis.record import write_analysis
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord
 from pipeline.analysis.stages import analyze_log, compare
-from pipeline.artefact_paths import IMPORTED_FOLDER, analysis_path, log_path
+from pipeline.artefact_paths import IMPORTED_FOLDER, analysis_path, check_contained, log_path
 from pipeline.errors import LogError, PipelineError, RunFailed, SpecError
+from pipeline.importer.mapping import ImportMapping
+from pipeline.importer.run import (
+    ImportOutcome,
+    imported_log_path,
+    prepare_import,
+    write_import,
+)
 from pipeline.logs import VerifiedLog, verify_log
 from pipeline.paths import display_path
 from pipeline.progress import interactive, stage
 from pipeline.provenance.keys import file_digest
 from pipeline.spec import Spec
 from pipeline.store.locks import folder_lock, remove_stale_temps
-from pipeline.store.validity import current_analysis, current_log, log_is_current
+from pipeline.store.validity import (
+    current_analysis,
+    current_log,
+    import_is_current,
+    log_is_current,
+)
 
 
 @dataclass(frozen=True)
@@ -169,6 +186,7 @@ class ArtefactStore:
         as ``expect`` (None: any end) is a RunFailed naming its log; the simulation is
         deterministic, so a reused run is not run again to fail the same way."""
         path = self.log_path(spec)
+        check_contained(self.logs, path.parent)
         log = None if force else self.current_run(spec)
         reused = log is not None
         warnings: list[str] = []
@@ -202,6 +220,42 @@ class ArtefactStore:
             if st is not None:
                 st.done(out.status)
         return log, out.warnings
+
+    # -- imports --------------------------------------------------------------------------
+
+    def import_log(self, source: Path | str, mapping: ImportMapping, name: str,
+                   resample_dt: float | None = None, here: Path | None = None,
+                   force: bool = False) -> ImportOutcome:
+        """Import ``source`` as ``<logs>/imported/<name>/run.parquet`` (pipeline.importer):
+        read and keyed first, then under the name's lock (a second import of the name waits)
+        the log there reused if it is this import and whole, refused (SpecError naming it) if
+        it is another unless ``force``, else written; a killed import's temporary files are
+        removed. ``here``: the mapping file's folder."""
+        path = imported_log_path(self.logs, name)
+        prep = prepare_import(source, mapping, name, resample_dt, here)
+        check_contained(self.logs, path.parent)
+        with folder_lock(path.parent):
+            remove_stale_temps(path.parent)
+            held = None if force or not path.exists() else self._held_import(path)
+            if held is not None and import_is_current(held, prep.key):
+                return ImportOutcome.of_record(path, held.rows, held.meta.imported, True)
+            if held is not None:
+                imp = held.meta.imported or {}
+                what = (f"an import of {imp['source']} (SHA-256 {imp['source_sha256'][:12]}…)"
+                        if imp else "a log that is not an import")
+                raise SpecError(f"--name {name}: {display_path(path)} holds {what}, not this "
+                                f"one (another source, mapping, robot or importer): give "
+                                f"--force to replace it, or another --name")
+            self._forget(path)
+            return write_import(prep, path)
+
+    def _held_import(self, path: Path) -> VerifiedLog | None:
+        """The log at ``path``, verified; None when it is damaged (made again in its place)."""
+        try:
+            return self.open_log(path)
+        except PipelineError:
+            self._forget(path)
+            return None
 
     # -- analyses -------------------------------------------------------------------------
 
@@ -247,6 +301,7 @@ class ArtefactStore:
                     raise LogError(f"{one.path}: a diverged log is not compared (--against): "
                                    f"only its divergence stage runs")
         path = self.analysis_path(log)
+        check_contained(self.out, path.parent)
         fresh = force or window_start is not None
         old = None if fresh else self.current_analysis(log, against, controller)
         if old is not None:
@@ -272,3 +327,10 @@ class ArtefactStore:
                      else analyze_log(against, window_start))
             record = replace(record, comparison=compare(record, other))
         return record
+
+
+def import_log(source: Path | str, mapping: ImportMapping, name: str,
+               logs: Path | str = "logs", resample_dt: float | None = None,
+               here: Path | None = None, force: bool = False) -> ImportOutcome:
+    """``python -m pipeline import``: :meth:`ArtefactStore.import_log` with a store of its own."""
+    return ArtefactStore(logs).import_log(source, mapping, name, resample_dt, here, force)

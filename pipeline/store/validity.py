@@ -70,6 +70,12 @@ def log_is_current(meta: LogMeta, rows: int, spec: Spec,
             and (meta.status != "complete" or rows == spec.n_steps))
 
 
+def import_is_current(log: VerifiedLog, key: str) -> bool:
+    """Whether the imported log is the import keyed ``key`` (the same source bytes, mapping,
+    robot, resampling and importer: :func:`pipeline.importer.run.import_key`)."""
+    return (log.meta.imported or {}).get("import_key") == key
+
+
 def _made_from(record: AnalysisRecord, log: VerifiedLog) -> bool:
     """The record names this log, and its content: a log re-run bitwise keeps its analysis,
     a log changed in any byte does not."""
@@ -159,10 +165,22 @@ def report_inputs(out: Path) -> list[Path]:
 
 
 def report_key(out: Path) -> str:
-    """The key of the reports under ``out``: the renderer's version and every input's hash
-    (the logs an analysis names are keyed through it: a changed log is a changed record)."""
-    parts = {p.relative_to(out).as_posix(): file_digest(p) for p in report_inputs(out)}
-    return json.dumps({"report_version": report_version(), "inputs": parts}, sort_keys=True)
+    """The key of the reports under ``out``: the renderer's version and every input's hash,
+    and the size and time of the log each analysis names (a log re-made is a changed record;
+    a log deleted or replaced since is flagged on its pages, so it changes the key too)."""
+    inputs = report_inputs(out)
+    parts = {p.relative_to(out).as_posix(): file_digest(p) for p in inputs}
+    logs = {}
+    for p in inputs:
+        if p.name == ANALYSIS_FILE:
+            try:
+                log = Path(json.loads(p.read_text())["log"])
+                st = log.stat()
+                logs[str(log)] = [st.st_size, st.st_mtime_ns, st.st_ino]
+            except (OSError, ValueError, KeyError, TypeError):
+                logs[p.relative_to(out).as_posix()] = None  # gone, or not a record
+    return json.dumps({"report_version": report_version(), "inputs": parts, "logs": logs},
+                      sort_keys=True)
 
 
 REPORT_KEY_FILE = ".report-key"  # in a report folder: the key of its last complete rendering

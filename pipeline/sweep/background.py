@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import RunFailed
+from pipeline.orphans import child_environment
 from pipeline.paths import display_path
 from pipeline.progress import say
 from pipeline.provenance.keys import analysis_version, sim_version
@@ -55,7 +56,9 @@ def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
     job.log = plan.table_path.parent / "sweep.log"
     job.log.parent.mkdir(parents=True, exist_ok=True)
     with open(job.log, "wb") as f:
-        job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT)
+        # The sweep ends with this command (kill -9 included): pipeline.orphans.
+        job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT,
+                                       env=child_environment())
     job.t0 = time.perf_counter()
     say(f"sweep {name}: started in the background ({len(plan.points)} points, {workers} "
         f"worker{'s' if workers != 1 else ''}) -> {display_path(job.log)}")

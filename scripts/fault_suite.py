@@ -1,0 +1,369 @@
+"""Issue 36's fault and bad-input suite: the importer, imported artefacts, the plant's fields,
+degenerate data and faults, each case through the command line as a user meets it.
+
+Run from the repository: ``.venv/bin/python scripts/fault_suite.py [--keep DIR]``. It runs the
+short nominal mission into a scratch folder, builds every case from that log, runs each
+command and prints one line per case and the totals: cases tried, refused cleanly (the
+expected exit code, one line on stderr naming the file or field, no traceback), accepted
+rightly (exit 0 and the data checked against the source), tracebacks, wrong answers (a
+refusal where an acceptance was due or the reverse, or accepted data that differ), data lost
+(a log that was there before a refused command and is not, or changed). Exit 1 if any case
+is not as expected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cli(*args, cwd: Path | None = None, stdin: bytes | None = None,
+        timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)], cwd=cwd or ROOT,
+                          input=stdin, capture_output=True, timeout=timeout)
+
+
+@dataclass
+class Case:
+    name: str
+    run: Callable[[Path], subprocess.CompletedProcess]
+    code: int  # the exit code expected
+    needle: str = ""  # in stderr (a refusal) or stdout (an acceptance)
+    check: Callable[[Path], str | None] | None = None  # a wrong answer's description, or None
+    keep: list[str] = field(default_factory=list)  # logs that must survive, relative to the dir
+
+
+@dataclass
+class Outcome:
+    case: Case
+    code: int
+    err: str
+    problem: str | None
+
+
+def _parquet(path: Path, t, q, v) -> Path:
+    pq.write_table(pa.table({"t": t, "q": list(q), "v": list(v)}), path)
+    return path
+
+
+def _npz(path: Path, **arrays) -> Path:
+    np.savez(path, **arrays)
+    return path
+
+
+def _imp(src, name: str, *extra) -> Callable[[Path], subprocess.CompletedProcess]:
+    return lambda d: cli("import", src(d) if callable(src) else src, "--robot", "short_nominal",
+                         "--name", name, "--out", d / "logs", *extra)
+
+
+def build_cases(base: dict, scratch: Path) -> list[Case]:
+    t, q, v = base["t"], base["q"], base["v"]
+    b = scratch / "src"
+    b.mkdir()
+    good = _parquet(b / "good.parquet", t, q, v)
+    deg_q, deg_v = q.copy(), v.copy()
+    deg_q[:, 9], deg_v[:, 8] = np.rad2deg(q[:, 9]), np.rad2deg(v[:, 8])
+    scaled = v.copy()
+    scaled[:, 6:] *= 1.00001
+    keep = np.r_[0:200, 201:len(t)]
+    jitter = t + np.where(np.arange(len(t)) == 50, 1e-6, 0.0)
+    quat = q.copy()
+    quat[:, 3:7] = q[:, [6, 3, 4, 5]]
+    files = {
+        "empty.csv": b"", "header.csv": b"t,q,v\n", "empty.npz": b"",
+        "random.npz": os.urandom(4096), "truncated.npz": None, "noarrays.npz": None,
+    }
+    for name, data in files.items():
+        if data is not None:
+            (b / name).write_bytes(data)
+    _npz(b / "full.npz", t=t, q=q, v=v)
+    (b / "truncated.npz").write_bytes((b / "full.npz").read_bytes()[:5000])
+    _npz(b / "noarrays.npz")
+    pq.write_table(pa.table({"t": pa.array([], pa.float64()),
+                             "q": pa.array([], pa.list_(pa.float64())),
+                             "v": pa.array([], pa.list_(pa.float64()))}), b / "empty.parquet")
+    _npz(b / "complex.npz", t=t, q=q + 1e-3j, v=v)
+    _npz(b / "bool.npz", t=t, q=q, v=v > 0)
+    _npz(b / "text.npz", t=t, q=q.astype(str), v=v)
+    _parquet(b / "deg_elbow.parquet", t, deg_q, deg_v)
+    _parquet(b / "scaled.parquet", t, q, scaled)
+    _parquet(b / "quat.parquet", t, quat, v)
+    _parquet(b / "gap.parquet", t[keep], q[keep], v[keep])
+    _parquet(b / "jitter.parquet", jitter, q, v)
+    big = np.array([2**63 + 5 + k * 30_000_000 for k in range(len(t))], dtype=object)
+    pq.write_table(pa.table({"t": pa.array(big.astype(np.uint64)), "q": list(q),
+                             "v": list(v)}), b / "uint64.parquet")
+    other = _parquet(b / "other.parquet", t[:100], q[:100], v[:100])
+    lines = ["t," + ",".join(f"q{i}" for i in range(13)) + "," + ",".join(
+        f"v{i}" for i in range(12))]
+    lines += [",".join(repr(float(x)) for x in (tk, *qk, *vk)) for tk, qk, vk in zip(
+        t, q, v, strict=True)]
+    csv_bytes = ("\n".join(lines) + "\n").encode()
+    qcols = ",".join(f"q{i}" for i in range(13))
+    vcols = ",".join(f"v{i}" for i in range(12))
+    imported = "logs/imported/{}/run.parquet"
+
+    def same_as_source(name: str) -> Callable[[Path], str | None]:
+        def check(d: Path) -> str | None:
+            got = pq.read_table(d / imported.format(name)).to_pydict()
+            if not np.array_equal(np.array(got["q"]), q) or not np.array_equal(
+                    np.array(got["v"]), v):
+                return "q or v differ from the source"
+            return None
+        return check
+
+    def pipe(d: Path) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "pipeline", "import", "/dev/stdin",
+                               "--format", "csv", "--q", qcols, "--v", vcols, "--robot",
+                               "short_nominal", "--name", "piped", "--out", str(d / "logs")],
+                              cwd=ROOT, input=csv_bytes, capture_output=True, timeout=300)
+
+    def piped_hash(d: Path) -> str | None:
+        md = pq.read_schema(d / imported.format("piped")).metadata
+        rec = json.loads(md[b"pipeline.import"])
+        return (None if rec["source_sha256"] == hashlib.sha256(csv_bytes).hexdigest()
+                else "the recorded hash is not of the bytes read")
+
+    def twice(d: Path) -> subprocess.CompletedProcess:
+        _imp(good, "twice")(d)
+        return _imp(good, "twice")(d)
+
+    def other_name(d: Path) -> subprocess.CompletedProcess:
+        _imp(good, "held")(d)
+        return _imp(other, "held")(d)
+
+    def forced(d: Path) -> subprocess.CompletedProcess:
+        _imp(good, "forced")(d)
+        return _imp(other, "forced", "--force")(d)
+
+    def forced_rows(d: Path) -> str | None:
+        n = pq.read_metadata(d / imported.format("forced")).num_rows
+        return None if n == 100 else f"{n} rows, the forced import's are 100"
+
+    def linked(d: Path) -> subprocess.CompletedProcess:
+        (d / "logs" / "imported").mkdir(parents=True, exist_ok=True)
+        (d / "elsewhere").mkdir()
+        (d / "logs" / "imported" / "linked").symlink_to(d / "elsewhere")
+        return _imp(good, "linked")(d)
+
+    def nothing_elsewhere(d: Path) -> str | None:
+        return "written through the link" if any((d / "elsewhere").iterdir()) else None
+
+    def stale(d: Path) -> subprocess.CompletedProcess:
+        folder = d / "logs" / "imported" / "stale"
+        folder.mkdir(parents=True)
+        (folder / ".run.parquet.x1.tmp").write_bytes(b"half")
+        return _imp(good, "stale")(d)
+
+    def stale_gone(d: Path) -> str | None:
+        left = list((d / "logs" / "imported" / "stale").glob(".*.tmp"))
+        return f"{left[0].name} left" if left else None
+
+    def out_file(d: Path) -> subprocess.CompletedProcess:
+        (d / "afile").write_text("x")
+        return cli("import", good, "--robot", "short_nominal", "--out", d / "afile")
+
+    def analysed(d: Path, name: str = "a") -> Path:
+        _imp(good, name)(d)
+        cli("analyze", d / imported.format(name), "--out", d / "rep")
+        return d / "rep" / "imported" / name / "analysis.json"
+
+    def edited_record(d: Path) -> subprocess.CompletedProcess:
+        path = analysed(d)
+        rec = json.loads(path.read_text())
+        rec["dominant"]["lag1"] = 0.99
+        path.write_text(json.dumps(rec))
+        return cli("report", "--out", d / "rep")
+
+    def edited_log(d: Path) -> subprocess.CompletedProcess:
+        _imp(good, "e")(d)
+        path = d / imported.format("e")
+        table = pq.read_table(path)
+        vv = np.array(table.column("v").to_pylist())
+        vv[10, 3] += 1e-9
+        table = table.set_column(table.schema.get_field_index("v"), "v",
+                                 pa.array(list(vv), table.schema.field("v").type))
+        pq.write_table(table, path)
+        return cli("analyze", path, "--out", d / "rep")
+
+    def gone_log(d: Path) -> subprocess.CompletedProcess:
+        analysed(d, "g")
+        (d / imported.format("g")).unlink()
+        return cli("report", "--out", d / "rep")
+
+    def flagged(d: Path) -> str | None:
+        page = (d / "rep" / "imported" / "g" / "imported.md").read_text()
+        return None if "Its log is gone" in page else "the page does not say its log is gone"
+
+    def killed_report(d: Path) -> subprocess.CompletedProcess:
+        analysed(d, "k")
+        proc = subprocess.Popen([sys.executable, "-m", "pipeline", "report", "--out",
+                                 str(d / "rep"), "--force"], cwd=ROOT,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        me, workers = psutil.Process(proc.pid), []
+        for _ in range(600):
+            workers = [c for c in me.children(recursive=True)
+                       if "spawn_main" in " ".join(c.cmdline())]
+            if len(workers) >= 2 or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        _, alive = psutil.wait_procs(workers, timeout=5)
+        alive = [p for p in alive if p.status() != psutil.STATUS_ZOMBIE]
+        for p in alive:
+            p.kill()
+        return subprocess.CompletedProcess(proc.args, 0 if not alive else 3,
+                                           b"", f"{len(alive)} worker(s) left".encode()
+                                           if alive else b"")
+
+    def spec(d: Path, text: str) -> Path:
+        path = d / "s.yaml"
+        path.write_text(text)
+        return path
+
+    def static(d: Path) -> subprocess.CompletedProcess:
+        n = 300
+        src = _parquet(d / "still.parquet", np.arange(n) * 0.03, np.repeat(q[:1], n, 0),
+                       np.zeros((n, 12)))
+        _imp(src, "still")(d)
+        return cli("analyze", d / imported.format("still"), "--out", d / "rep")
+
+    def static_json(d: Path) -> str | None:
+        text = (d / "rep" / "imported" / "still" / "analysis.json").read_text()
+        return "NaN in analysis.json" if "NaN" in text else None
+
+    return [
+        Case("empty CSV", _imp(b / "empty.csv", "x"), 2, "empty: no header"),
+        Case("CSV header only", _imp(b / "header.csv", "x"), 2, "no rows"),
+        Case("empty .npz", _imp(b / "empty.npz", "x"), 2, "not a .npz file"),
+        Case("random bytes .npz", _imp(b / "random.npz", "x"), 2, "not a .npz file"),
+        Case("truncated .npz", _imp(b / "truncated.npz", "x"), 2, "not a .npz file"),
+        Case(".npz without arrays", _imp(b / "noarrays.npz", "x"), 2, "holds no arrays"),
+        Case("Parquet of 0 rows", _imp(b / "empty.parquet", "x"), 2, "no rows"),
+        Case("complex q", _imp(b / "complex.npz", "x"), 2, "complex numbers"),
+        Case("boolean v", _imp(b / "bool.npz", "x"), 2, "booleans"),
+        Case("text q in .npz", _imp(b / "text.npz", "x"), 2, "not numbers"),
+        Case("elbow in degrees in q and v", _imp(b / "deg_elbow.parquet", "x"), 2,
+             "joint elbow_joint"),
+        Case("joint rates ×1.00001", _imp(b / "scaled.parquet", "x"), 2, "1.00001 times"),
+        Case("quaternion w first", _imp(b / "quat.parquet", "x"), 2, "quaternion order"),
+        Case("a dropped row", _imp(b / "gap.parquet", "x"), 2, "gap.parquet: uneven time base"),
+        Case("one stamp jittered 1 µs", _imp(b / "jitter.parquet", "x"), 2, "jitter: row 50"),
+        Case("--resample 1e-9", _imp(b / "gap.parquet", "x", "--resample", "1e-9"), 2,
+             "over the memory budget"),
+        Case("--resample 1000", _imp(b / "gap.parquet", "x", "--resample", "1000"), 2,
+             "at least 3"),
+        Case("--name of 300 characters", _imp(good, "n" * 300), 2, "300 characters"),
+        Case("--name ../escape", _imp(good, "../escape"), 2, "--name '../escape'"),
+        Case("--out is a file", out_file, 2, "cannot write"),
+        Case("imported/<name> a link out", linked, 2, "symbolic link out of",
+             nothing_elsewhere),
+        Case("uint64 ns stamps ≥ 2⁶³", _imp(b / "uint64.parquet", "u", "--time-unit", "ns"), 0,
+             "rows at dt 0.03", same_as_source("u")),
+        Case("a pipe (/dev/stdin)", pipe, 0, "rows at dt 0.03", piped_hash),
+        Case("the same import twice", twice, 0, "up to date", same_as_source("twice")),
+        Case("another source, same name", other_name, 2, "--force", same_as_source("held"),
+             keep=[imported.format("held")]),
+        Case("another source, --force", forced, 0, "100 rows", forced_rows),
+        Case("a killed import's .tmp", stale, 0, "rows at dt", stale_gone),
+        Case("analysis.json edited by hand", edited_record, 2, "key record_sha256"),
+        Case("imported v edited by 1e-9", edited_log, 1, "damaged"),
+        Case("report after the log is deleted", gone_log, 0, "", flagged),
+        Case("kill -9 of report", killed_report, 0, ""),
+        Case("a robot held still", static, 0, "undetermined", static_json),
+        Case("mission shorter than a step",
+             lambda d: cli("run", spec(d, "extends: short_nominal\nmission: {duration: 0.01}\n"),
+                           "--out", d / "logs"), 2, "shorter than one step"),
+        Case("reduced plant given delay_steps",
+             lambda d: cli("validate", spec(d, "extends: short_nominal\nmission: {plant: "
+                                               "{model: reduced, delay_steps: 1}}\n")),
+             2, "delay_steps"),
+        Case("a 2-step mission analysed",
+             lambda d: (cli("run", spec(d, "extends: short_nominal\nmission: {duration: 0.06}\n"),
+                            "--out", d / "logs"),
+                        cli("analyze", d / "logs" / "s" / "run.parquet", "--out", d / "rep"))[1],
+             2, "fewer than 3"),
+    ]
+
+
+def run_case(case: Case, scratch: Path) -> Outcome:
+    d = scratch / "".join(c if c.isalnum() else "_" for c in case.name)
+    d.mkdir()
+    r = case.run(d)
+    out = r.stdout.decode() if isinstance(r.stdout, bytes) else (r.stdout or "")
+    err = r.stderr.decode() if isinstance(r.stderr, bytes) else (r.stderr or "")
+    problem = None
+    if "Traceback" in err:
+        problem = "traceback"
+    elif r.returncode != case.code:
+        problem = f"exit {r.returncode}, expected {case.code}: {err.strip()[:200]}"
+    elif case.code != 0 and (len(err.strip().splitlines()) != 1 or case.needle not in err):
+        problem = f"not one line naming it: {err.strip()[:300]}"
+    elif case.code == 0 and case.needle and case.needle not in out + err:
+        problem = f"{case.needle!r} not said: {(out + err).strip()[:300]}"
+    elif case.check is not None:
+        problem = case.check(d)
+    for rel in case.keep:
+        if not (d / rel).is_file():
+            problem = f"data lost: {rel}"
+    return Outcome(case, r.returncode, err, problem)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--keep", metavar="DIR", help="build the cases in DIR and keep it")
+    a = ap.parse_args()
+    scratch = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="fault_suite."))
+    scratch.mkdir(parents=True, exist_ok=True)
+    try:
+        r = cli("run", "short_nominal", "--out", scratch / "base")
+        if r.returncode:
+            print(r.stderr.decode(), file=sys.stderr)
+            return 1
+        table = pq.read_table(scratch / "base" / "short_nominal" / "run.parquet",
+                              columns=["t", "q", "v"]).to_pydict()
+        base = {k: np.array(v) for k, v in table.items()}
+        cases = build_cases(base, scratch)
+        outcomes = []
+        for case in cases:
+            t0 = time.perf_counter()
+            o = run_case(case, scratch)
+            outcomes.append(o)
+            status = "ok" if o.problem is None else f"WRONG: {o.problem}"
+            print(f"{case.name:38s} exit {o.code}  {time.perf_counter() - t0:5.1f} s  {status}",
+                  flush=True)
+        refused = sum(o.problem is None and o.case.code != 0 for o in outcomes)
+        accepted = sum(o.problem is None and o.case.code == 0 for o in outcomes)
+        tracebacks = sum(o.problem == "traceback" for o in outcomes)
+        lost = sum((o.problem or "").startswith("data lost") for o in outcomes)
+        wrong = sum(o.problem is not None for o in outcomes) - tracebacks - lost
+        print(f"cases {len(outcomes)}: refused cleanly {refused}, accepted rightly {accepted}, "
+              f"tracebacks {tracebacks}, wrong answers {wrong}, data lost {lost}")
+        return 0 if refused + accepted == len(outcomes) else 1
+    finally:
+        if not a.keep:
+            shutil.rmtree(scratch, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

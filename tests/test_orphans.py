@@ -1,0 +1,78 @@
+"""kill -9 of a command leaves no worker behind (issue 36, item 6; pipeline/orphans.py)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import psutil
+import pytest
+from report_fixtures import built
+
+from pipeline.paths import PROJECT_ROOT
+
+GRACE_S = 5.0  # the watch looks every 0.2 s; a loaded 2-core machine may take longer
+
+
+def _gone_within(procs: list[psutil.Process], seconds: float) -> list[psutil.Process]:
+    """The processes still alive after ``seconds``."""
+    _, alive = psutil.wait_procs(procs, timeout=seconds)
+    return [p for p in alive if p.status() != psutil.STATUS_ZOMBIE]
+
+
+def test_a_worker_ends_with_the_process_that_started_it(tmp_path):
+    """A parent starts a worker that calls exit_with_parent and sleeps for a minute; the
+    parent is killed with SIGKILL (no clean-up runs): the worker is gone within seconds. Without
+    the watch it would sleep on (the control: a worker that does not call it)."""
+    code = textwrap.dedent("""
+        import os, subprocess, sys, time
+        watch = sys.argv[1] == "watch"
+        child = ("from pipeline.orphans import exit_with_parent; import time; "
+                 f"exit_with_parent({os.getpid()}) if {watch} else None; time.sleep(60)")
+        p = subprocess.Popen([sys.executable, "-c", child])
+        print(p.pid, flush=True)
+        time.sleep(60)
+    """)
+    alive = {}
+    for mode in ("watch", "control"):
+        parent = subprocess.Popen([sys.executable, "-c", code, mode], stdout=subprocess.PIPE,
+                                  text=True, cwd=PROJECT_ROOT)
+        worker = psutil.Process(int(parent.stdout.readline()))
+        time.sleep(1.0)  # the worker has imported and started its watch
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        alive[mode] = _gone_within([worker], GRACE_S if mode == "watch" else 1.0)
+        for p in alive[mode]:
+            p.kill()
+    assert alive["watch"] == [] and len(alive["control"]) == 1
+
+
+@pytest.mark.slow
+def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
+    out = tmp_path / "rep"
+    shutil.copytree(built().reports, out)
+    cmd = [sys.executable, "-m", "pipeline", "report", "--out", str(out), "--force"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "PYTHONPATH": str(PROJECT_ROOT)})
+    me = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    workers: list[psutil.Process] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = [c for c in me.children(recursive=True)
+                   if "spawn_main" in " ".join(c.cmdline())]
+        if len(workers) >= 2:
+            break
+        time.sleep(0.1)
+    assert len(workers) >= 2, "the figure processes never started"
+    time.sleep(1.0)  # drawing
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    left = _gone_within(workers, GRACE_S)
+    for p in left:
+        p.kill()
+    assert left == [], [p.cmdline() for p in left]
