@@ -7,6 +7,7 @@ This is the one place where the pipeline's error kinds become exit codes.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -22,7 +23,7 @@ def _cmd_validate(a: argparse.Namespace) -> int:
 
 def _cmd_run(a: argparse.Namespace) -> int:
     from pipeline.paths import display_path
-    from pipeline.sim.robot_file import load_robot_model
+    from pipeline.sim.robot_file import load_spec_robot
     from pipeline.spec import load_spec
     from pipeline.store.door import ArtefactStore
 
@@ -30,7 +31,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     # one line (exit 2), not a stage that started and failed.
     specs = [load_spec(s) for s in a.spec]
     for spec in specs:
-        load_robot_model(spec.robot_path, spec.robot.camera_frame, spec.robot.bus_inertia_scale)
+        load_spec_robot(spec)
     store = ArtefactStore(a.out)
     for spec in specs:
         # A stored run that failed fails again, unrun: the simulation is deterministic.
@@ -65,12 +66,16 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
 
 
 def _cmd_import(a: argparse.Namespace) -> int:
-    from pipeline.importer.mapping import load_mapping
+    from pipeline.importer.mapping import import_spec, load_mapping, robot_block
     from pipeline.paths import display_path
-    from pipeline.store.door import import_log
+    from pipeline.sim.robot_file import load_spec_robot
 
     def columns(text: str | None) -> str | list[str] | None:
-        return None if text is None else (text.split(",") if "," in text else text)
+        """A column, key or selection (``states.x[:, 0:13]``: its comma is the selection's),
+        or scalar columns separated by commas."""
+        if text is None or "," not in re.sub(r"\[[^\]]*\]", "", text):
+            return text
+        return text.split(",")
 
     mapping_file = Path(a.mapping) if a.mapping else None
     given = {"format": a.format, "robot": a.robot, "time_unit": a.time_unit, "dt": a.dt,
@@ -84,8 +89,15 @@ def _cmd_import(a: argparse.Namespace) -> int:
     mapping = load_mapping(mapping_file, options)
     source = Path(a.source)
     name = a.name or (source.stem if source.suffix else source.name)
-    done = import_log(source, mapping, name, a.out, a.resample,
-                      mapping_file.resolve().parent if mapping_file else None, force=a.force)
+    here = mapping_file.resolve().parent if mapping_file else None
+    # The options, the mapping and the robot are checked before the log is read and before
+    # the importer's libraries load: a bad robot file is refused in about validate's time.
+    robot, _, robot_here = robot_block(mapping, here)
+    spec = import_spec(name, robot, 1.0, 1, robot_here, str(source))[0]
+    load_spec_robot(spec)
+    from pipeline.store.door import import_log
+
+    done = import_log(source, mapping, name, a.out, a.resample, here, force=a.force)
     if done.reused:
         print(f"{name}: up to date ({done.rows} rows: the same source, mapping, robot and "
               f"importer as the log there; --force imports it again) -> "
@@ -334,8 +346,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     im = _stage(sub, "import", "import a log another simulator or a spacecraft wrote (CSV, "
                 "Parquet, .npz, ROS 2 bag, MCAP) into DIR/imported/<name>/run.parquet",
-                "states.npz --robot nominal --allow-pickle --q states.q --v states.v "
-                "--time states.t")
+                "states_ur3_1.npz --robot nominal --allow-pickle --time states.t "
+                "--q 'states.x[:, 0:13]' --v 'states.x[:, 13:25]'")
     im.add_argument("source", help="the log file, a ROS 2 bag's folder or an MCAP file "
                     "(e.g. npz/states_ur3_1.npz)")
     im.add_argument("--mapping", metavar="FILE",
@@ -355,10 +367,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the stamps' unit (default: s; e.g. --time-unit ns)")
     im.add_argument("--dt", type=float, metavar="SECONDS",
                     help="the step of a log without time stamps (default: none; e.g. --dt 0.03)")
-    im.add_argument("--q", metavar="COLUMN[,…]", help="q's vector column or key, or its 13 "
-                    "scalar columns comma-separated (default: q; e.g. --q states.q)")
+    im.add_argument("--q", metavar="COLUMN[,…]", help="q's vector column or key, a selection "
+                    "of columns, or its 13 scalar columns comma-separated (default: q; e.g. "
+                    "--q 'states.x[:, 0:13]', the precursor's layout)")
     im.add_argument("--v", metavar="COLUMN[,…]", help="v's, 12 wide (default: v; "
-                    "e.g. --v states.v)")
+                    "e.g. --v 'states.x[:, 13:25]')")
     im.add_argument("--quaternion", choices=("xyzw", "wxyz"),
                     help="the bus quaternion's order (default: xyzw; e.g. --quaternion wxyz)")
     im.add_argument("--velocity-frame", choices=("bus", "world"),

@@ -34,7 +34,11 @@ META_KEYS = ("spec", "spec_hash", "sim_version", "robot_file", "robot_hash", "st
 MAY_BE_INFINITE = ("kappa_G", "kappa_J")
 # What an imported log's pipeline.import record holds (pipeline/importer/run.py writes it).
 IMPORT_KEYS = ("source", "source_sha256", "format", "mapping", "robot_from", "import_key",
-               "conventions", "time", "quat_norm_error", "consistency")
+               "s_min_G_from", "conventions", "time", "quat_norm_error", "consistency")
+# Where an imported log's s_min_G came from (its record's ``s_min_G_from``): the source's own
+# column (the mapping's s_min_G), which the analysis' provenance check compares with Γ rebuilt
+# from q; or rebuilt from q on import, which that check would compare with itself.
+S_MIN_G_SOURCE, S_MIN_G_REBUILT = "source", "rebuilt from q on import"
 ROW_GROUP = 65_536
 
 

@@ -65,6 +65,10 @@ class RobotSpec(_Block):
     q_bar: list[Finite] = Field(default=[0.0, -0.367, -1.763, -0.993, -5.95, 0.0])
     damped_inverse: DampedInverse = DampedInverse()
     bus_inertia_scale: Positive = 1.0
+    # Where package:// mesh URIs of a URDF are looked for (relative: to the spec's folder), for
+    # the MuJoCo cross-parse only; a mesh it does not find is not needed where its body's
+    # inertia is explicit. Pinocchio's model never reads a mesh: out of the spec hash.
+    package_dirs: list[str] = Field(default_factory=list)
 
     @field_validator("q_bar")
     @classmethod
@@ -269,6 +273,13 @@ class Spec(_Block):
             raise SpecError(f"spec {self.name}: robot file {self.robot.file} not resolved")
         return self._robot_path
 
+    @property
+    def package_dirs(self) -> tuple[Path, ...]:
+        """robot.package_dirs as folders: relative ones from the spec's folder."""
+        base = self._here if self._here is not None else Path.cwd()
+        return tuple(Path(d) if Path(d).is_absolute() else base / d
+                     for d in self.robot.package_dirs)
+
     def content(self) -> dict[str, Any]:
         """The spec's content: everything but its name."""
         d = self.model_dump(mode="json")
@@ -291,7 +302,7 @@ class Spec(_Block):
 # They do not enter the spec hash, so editing them re-simulates nothing (tests/test_spec.py
 # runs a mission with other values and gets the same log, bit for bit).
 INERT_FIELDS = (("config_sampling", "low"), ("config_sampling", "high"),
-                ("config_sampling", "floor"))
+                ("config_sampling", "floor"), ("robot", "package_dirs"))
 
 
 def spec_hash_of(content: dict[str, Any]) -> str:

@@ -48,11 +48,10 @@ class Validation:
 def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validation:
     """Load and check ``spec_arg`` as ``run`` would, without simulating; SpecError (exit 2)
     naming the field or file when ``run`` would refuse it."""
-    from pipeline.sim.robot_file import load_robot_model
+    from pipeline.sim.robot_file import load_spec_robot
 
     spec = load_spec(spec_arg)
-    model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
-                             spec.robot.bus_inertia_scale)
+    model = load_spec_robot(spec)
     import pinocchio as pin
 
     q = pin.neutral(model)
@@ -101,7 +100,9 @@ def report_lines(v: Validation) -> list[str]:
     c = v.card
     return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
             f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
-            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable})",
+            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable}); the bus body is "
+            f"{', '.join(c.bus_links)} ({c.bus_mass:.4g} kg, I_zz,bus {c.I_zz_bus:.4g} kg·m²: "
+            f"every link welded to the free joint)",
             f"  camera-roll damping mode (closed form): μ_roll = D_o/I_roll = {c.mu_roll:.4g} "
             f"1/s, dt·μ_roll = {m.dt * c.mu_roll:.3g} (I_roll = {c.I_roll:.4g} kg·m² about the "
             f"last joint's axis; its CoM {c.roll_axis_offset:.2g} m and the camera "

@@ -19,10 +19,25 @@ from pipeline.paths import PROJECT_ROOT
 GRACE_S = 5.0  # the watch looks every 0.2 s; a loaded 2-core machine may take longer
 
 
+def _cmdline(p: psutil.Process) -> str:
+    """A process's command line; empty for one that has ended (a zombie, or gone)."""
+    try:
+        return " ".join(p.cmdline())
+    except psutil.Error:
+        return ""
+
+
 def _gone_within(procs: list[psutil.Process], seconds: float) -> list[psutil.Process]:
     """The processes still alive after ``seconds``."""
     _, alive = psutil.wait_procs(procs, timeout=seconds)
-    return [p for p in alive if p.status() != psutil.STATUS_ZOMBIE]
+    return [p for p in alive if _running(p)]
+
+
+def _running(p: psutil.Process) -> bool:
+    try:
+        return p.status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
 
 
 def test_a_worker_ends_with_the_process_that_started_it(tmp_path):
@@ -63,8 +78,7 @@ def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
     deadline = time.monotonic() + 120
     workers: list[psutil.Process] = []
     while time.monotonic() < deadline and proc.poll() is None:
-        workers = [c for c in me.children(recursive=True)
-                   if "spawn_main" in " ".join(c.cmdline())]
+        workers = [c for c in me.children(recursive=True) if "spawn_main" in _cmdline(c)]
         if len(workers) >= 2:
             break
         time.sleep(0.1)

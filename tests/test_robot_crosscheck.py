@@ -11,6 +11,7 @@ the same file content compiles nothing with MuJoCo.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -33,14 +34,14 @@ KINDS = {"position", "rotation", "axis", "mass", "com", "inertia", "twist", "mas
 def compiles(monkeypatch, tmp_path) -> list:
     """An empty verdict cache, and the list of MuJoCo compiles made."""
     made: list = []
-    real = rc.mujoco_model
+    real = rc.mujoco_spec
 
-    def counted(path):
+    def counted(path, *args):
         made.append(path)
-        return real(path)
+        return real(path, *args)
 
     monkeypatch.setattr(rc, "cache_dir", lambda: tmp_path / "xcheck")
-    monkeypatch.setattr(rc, "mujoco_model", counted)
+    monkeypatch.setattr(rc, "mujoco_spec", counted)
     return made
 
 
@@ -188,3 +189,72 @@ def test_another_content_or_a_damaged_verdict_checks_again(compiles, tmp_path):
     (rc.cache_dir() / f"{key}.json").write_text("{not json")
     load_robot_model(copy, "camera")
     assert len(compiles) == 3
+
+
+# -- robot files as users have them: meshes (issue 33, item 4) --------------------------------
+
+def _binary_stl(path: Path) -> None:
+    """A tetrahedron of 0.1 m as a binary STL (MuJoCo reads binary STL only)."""
+    import struct
+
+    v = [(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0, 0, 0.1)]
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    data = b"tetrahedron".ljust(80, b" ") + struct.pack("<I", len(faces))
+    for a, b, c in faces:
+        data += struct.pack("<12fH", 0, 0, 0, *v[a], *v[b], *v[c], 0)
+    path.write_bytes(data)
+
+
+def _seed_with_mesh(tmp_path, explicit: bool) -> Path:
+    """The seed MJCF with a mesh geom on the bus body, whose file is not there; the bus keeps
+    its explicit inertial, or loses it (its inertia would then come from the mesh)."""
+    text = SEED.read_text()
+    text = text.replace('<option gravity="0 0 0"/>', '<option gravity="0 0 0"/>\n  <asset>'
+                        '<mesh name="base" file="meshes/base.stl"/></asset>', 1)
+    bus = '<inertial pos="0 0 0" quat="1 0 0 0" mass="5.0" diaginertia="0.008 0.008 0.01"/>'
+    assert bus in text
+    text = text.replace(bus, (bus if explicit else "") + '<geom type="mesh" mesh="base"/>', 1)
+    path = tmp_path / f"seed_mesh_{explicit}.xml"
+    path.write_text(text)
+    return path
+
+
+def test_a_missing_mesh_is_not_needed_where_the_inertia_is_explicit(compiles, tmp_path):
+    path = _seed_with_mesh(tmp_path, explicit=True)
+    result = rc.compare_parsers(path, _parse(path), "camera")
+    assert result.notes == ["mesh meshes/base.stl missing, not needed: the inertia of "
+                            "box_base is explicit"]
+    seed = rc.compare_parsers(SEED, _parse(SEED), "camera")
+    assert result.max_diff.keys() == seed.max_diff.keys()
+    load_robot_model(path, "camera")  # the loader accepts it
+
+
+def test_a_missing_mesh_that_gives_a_body_its_inertia_is_refused_naming_the_body(compiles,
+                                                                                 tmp_path):
+    path = _seed_with_mesh(tmp_path, explicit=False)
+    with pytest.raises(SpecError, match=r"body 'box_base': its inertia comes from its geoms, "
+                                        r"and its mesh 'meshes/base.stl' is missing"):
+        load_robot_model(path, "camera")
+
+
+def test_package_uris_resolve_against_the_package_dirs_or_are_ignored_saying_so(compiles,
+                                                                                tmp_path):
+    """The servicer's URDF with a package:// collision mesh on a link of explicit inertia:
+    without the package folder the cross-parse passes and says the mesh was not needed; with
+    it, the mesh is found (a real STL here) and nothing is said."""
+    text = SERVICER.read_text().replace(
+        '<link name="shoulder_link">',
+        '<link name="shoulder_link"><collision><geometry><mesh '
+        'filename="package://ur_description/meshes/shoulder.stl"/></geometry></collision>', 1)
+    path = tmp_path / "servicer_mesh.urdf"
+    path.write_text(text)
+    model = _parse(path)
+    ignored = rc.compare_parsers(path, model, "camera")
+    assert len(ignored.notes) == 1 and "shoulder.stl missing, not needed" in ignored.notes[0]
+    assert "shoulder_link" in ignored.notes[0]
+    pkg = tmp_path / "pkgs" / "ur_description" / "meshes"
+    pkg.mkdir(parents=True)
+    _binary_stl(pkg / "shoulder.stl")
+    found = rc.compare_parsers(path, model, "camera", (tmp_path / "pkgs",))
+    assert found.notes == []
+    load_robot_model(path, "camera", package_dirs=(tmp_path / "pkgs",))

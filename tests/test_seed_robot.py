@@ -52,6 +52,7 @@ def test_the_seed_robot_is_the_notes_system(robot):
     card = robot.card(robot.start_configuration())
     assert card.total_mass == pytest.approx(17.18, rel=1e-12)
     assert card.bus_mass == pytest.approx(7.0, rel=1e-12)  # box 5 kg + UR3 base_link 2 kg
+    assert card.bus_links == ["box_base", "base_link"]  # the card says so (issue 33, item 4)
     assert card.I_zz_bus == pytest.approx(I_ZZ_BUS, rel=1e-12)
     assert card.pan_axis_offset == pytest.approx(0.0, abs=1e-15)
     assert card.mu_bus == pytest.approx(2.0 / I_ZZ_BUS, rel=1e-12)  # 128 1/s
@@ -62,6 +63,7 @@ def test_the_servicer_card_predicts_a_slow_bus():
     r = GiordanoRobot(load_spec("servicer_nominal"))
     card = r.card(r.start_configuration())
     assert card.I_zz_bus == pytest.approx(10.625, rel=1e-12)  # the URDF's bus izz
+    assert card.bus_links == ["bus"]
     assert card.mu_bus == pytest.approx(2.0 / 10.625, rel=1e-12)  # ≈ 0.19 1/s
 
 

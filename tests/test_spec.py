@@ -346,9 +346,9 @@ def test_a_yaml_text_read_twice_gives_two_independent_documents_and_errors_twice
 
 
 def test_the_inert_fields_change_no_run_and_no_hash(tmp_path):
-    """config_sampling.low/high/floor stay out of the spec hash because a run does not read
-    them: a mission with other values writes the same log, bit for bit; a field a run does read
-    (config_sampling.seed) changes the hash."""
+    """config_sampling.low/high/floor and robot.package_dirs stay out of the spec hash because
+    a run does not read them: a mission with other values writes the same log, bit for bit; a
+    field a run does read (config_sampling.seed) changes the hash."""
     import pyarrow.parquet as pq
 
     from pipeline.sim.run import run_spec
@@ -356,8 +356,10 @@ def test_the_inert_fields_change_no_run_and_no_hash(tmp_path):
 
     base = with_overrides(load_spec("short_nominal"), {"mission.duration": 0.6}, name="a")
     other = with_overrides(base, {f"{b}.{k}": v for (b, k), v in
-                                  zip(INERT_FIELDS, (0.2, 0.4, 0.9), strict=True)}, name="a")
-    assert other.config_sampling.floor == 0.9 and other.spec_hash == base.spec_hash
+                                  zip(INERT_FIELDS, (0.2, 0.4, 0.9, ["pkgs"]), strict=True)},
+                          name="a")
+    assert other.config_sampling.floor == 0.9 and other.robot.package_dirs == ["pkgs"]
+    assert other.spec_hash == base.spec_hash
     assert with_overrides(base, {"config_sampling.seed": 3}).spec_hash != base.spec_hash
     logs = [pq.read_table(run_spec(s, tmp_path / d).path) for s, d in ((base, "x"), (other, "y"))]
     assert all(logs[0].column(c).equals(logs[1].column(c)) for c in logs[0].column_names)

@@ -1,8 +1,9 @@
 """The data stages of an imported log (``pipeline.origin = imported``): what t, q and v
 alone say, and the damping theory only where the user declares the controller.
 
-Run on every imported log: Γ rebuilt from q with the provenance check against the σ columns
-the import wrote (stage 1), the per-direction projection, lag-1 and the dominant direction
+Run on every imported log: Γ rebuilt from q (stage 1; its provenance check only against a
+σ_min(Γ) the source logged itself, else not applicable: the import rebuilt the σ columns
+from the same q), the per-direction projection, lag-1 and the dominant direction
 (stages 2–3), the per-step velocity jump (stage 6), the bus rate's statistics and the
 conditioning along the log. Run only with ``--controller SPEC`` (the gains, the integrator and
 the step of the loop that flew the log): the damping modes at the representative step, dt·μ_max
@@ -29,7 +30,7 @@ from pipeline.analysis.stages import (
 )
 from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import SpecError
-from pipeline.logs import VerifiedLog
+from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, VerifiedLog
 from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.robot import GiordanoRobot
@@ -75,7 +76,10 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
     n, dt = log.rows, log.spec.mission.dt
     win = choose_window(n, dt, window_start, str(log.path))
     robot = GiordanoRobot(log.spec)
-    prov, directions, dominant, nu_breve = direction_stages(robot, log, win)
+    # The provenance check is one only against a σ the source logged itself: σ columns the
+    # import rebuilt from this q would agree with Γ rebuilt from it by construction.
+    own_sigma = log.meta.imported.get("s_min_G_from") == S_MIN_G_SOURCE
+    prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check=own_sigma)
     cols = log.columns(["v", "s_min_G", "s_min_J", "kappa_G"], win.start, win.stop)
     jumps = signals.velocity_jumps(cols["v"])
     damping, prediction = None, None
@@ -93,11 +97,12 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         dt=dt, n_steps=n,
         origin=rs.Origin(source=imp["source"], source_sha256=imp["source_sha256"],
                          format=imp["format"], robot_from=imp["robot_from"],
+                         robot_file=log.meta.robot_file, robot_sha256=log.meta.robot_hash,
                          conventions=imp["conventions"],
                          consistency_median_ratio=imp["consistency"]["median_ratio"]),
-        stages=stages_run(controller),
+        stages=stages_run(controller, own_sigma),
         window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
-        provenance=prov, directions=directions, dominant=dominant,
+        provenance=prov if own_sigma else None, directions=directions, dominant=dominant,
         velocity_jump=rs.VelocityJump(median=float(np.median(jumps)), max=float(np.max(jumps))),
         bus_rate=bus_rate_data(cols["v"][:, 3:6]),
         conditioning=conditioning_along(log, robot.floor),
@@ -106,16 +111,21 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
     )
 
 
-def stages_run(controller: Spec | None) -> list[rs.StageRun]:
+def stages_run(controller: Spec | None, own_sigma: bool) -> list[rs.StageRun]:
     """Which stages ran on the imported log, and why (the report shows it)."""
     data = "from t, q and v, which the log has"
+    provenance = ("against the source's own σ_min(Γ) column (mapping field s_min_G)"
+                  if own_sigma else
+                  f"not applicable: the log's σ columns were {S_MIN_G_REBUILT}, so Γ rebuilt "
+                  f"from the same q would agree by construction; a check needs the source's "
+                  f"own σ_min(Γ) (mapping field s_min_G)")
     declared = (f"from the controller declared with --controller ({controller.name}: its "
                 f"gains, integrator and step)" if controller is not None else
                 "not run: no controller declared (--controller SPEC); a prediction is never "
                 "made from gains the log did not have")
     no_x = "not run: Φ needs the task error x̃ the controller held, which the log does not have"
     return [
-        rs.StageRun(stage="1 provenance (Γ rebuilt from q)", ran=True, why=data),
+        rs.StageRun(stage="1 provenance (Γ rebuilt from q)", ran=own_sigma, why=provenance),
         rs.StageRun(stage="2–3 directions, lag-1, dominant direction", ran=True, why=data),
         rs.StageRun(stage="6 per-step velocity jump", ran=True, why=data),
         rs.StageRun(stage="bus rate statistics and conditioning", ran=True, why=data),

@@ -324,6 +324,8 @@ class Origin:
     source_sha256: str
     format: str
     robot_from: str
+    robot_file: str  # the robot file the log was imported against, and its SHA-256: two
+    robot_sha256: str  # imports of one source against two robots are two different logs
     conventions: dict[str, str]
     consistency_median_ratio: float  # the consistency check's median residual/bound (eq. 33)
 
@@ -380,7 +382,8 @@ class ImportedRecord(Identity):
     origin: Origin
     stages: list[StageRun]
     window: Window
-    provenance: Provenance
+    # Absent where it would be no check: the σ columns rebuilt from q on import.
+    provenance: Provenance | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     directions: list[Direction]
     dominant: Dominant
     velocity_jump: VelocityJump

@@ -79,7 +79,9 @@ def imported_lines(record: ImportedRecord, path: Path) -> list[str]:
              f"{o.source_sha256[:12]}): dominant lag-1 {_lag(dom.lag1)} (σ {dom.sigma:.3g}), "
              f"bus rate lag-1 {_lag(record.bus_rate.lag1)}, median ‖Δv‖ "
              f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
-             f"{record.provenance.max_abs_s_min_G:.1e}, σ_min(Γ) ≥ "
+             + (f"{record.provenance.max_abs_s_min_G:.1e}" if record.provenance is not None
+                else "not applicable (σ rebuilt from q on import)")
+             + f", σ_min(Γ) ≥ "
              f"{record.conditioning.s_min_G_min:.3g} -> {path}"]
     if record.damping is not None:
         d, p = record.damping, record.prediction

@@ -19,7 +19,6 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.errors import SpecError
 
@@ -101,6 +100,10 @@ def to_project(q_raw: np.ndarray, v_raw: np.ndarray, conv: Conventions,
     off = np.abs(norm - 1.0) > QUAT_ROUNDING
     q[off, 3:7] /= norm[off, None]
     if conv.velocity_frame == "world":
+        # Imported here: the mapping (which names these conventions) is read before the log
+        # and should not wait for SciPy's spatial package (a refusal there is quick).
+        from scipy.spatial.transform import Rotation
+
         R_bt = Rotation.from_quat(q[:, 3:7]).inv()  # world axes → bus axes
         v[:, 0:3] = R_bt.apply(v[:, 0:3])
         v[:, 3:6] = R_bt.apply(v[:, 3:6])

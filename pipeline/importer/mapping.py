@@ -5,8 +5,13 @@ each field also an option of ``python -m pipeline import``).
     robot: nominal           # a spec (name or file) whose robot block is used, or the block
     time: t                  # the time stamps' column or key; or `dt:` for a log without one
     time_unit: s             # s | ms | us | ns
-    q: q                     # one vector column/key (13 wide), or a list of 13 scalar columns
+    q: q                     # one vector column/key (13 wide), a selection of columns
+                             # ("states.x[:, 0:13]", pipeline/importer/selection.py), or a
+                             # list of 13 scalar columns
     v: v                     # likewise, 12 wide
+    s_min_G: sigma           # the source's own σ_min(Γ) column, if it logged one (default:
+                             # none: the σ columns are rebuilt from q, and the provenance
+                             # check, which would compare q with itself, is not applicable)
     quaternion: xyzw         # xyzw | wxyz
     velocity_frame: bus      # bus | world
     linear_velocity: origin  # origin | bus_com
@@ -15,8 +20,8 @@ each field also an option of ``python -m pipeline import``).
     topics: {odometry: /bus/odom, joints: /arm/joint_states}   # bags: nav_msgs/Odometry and
                                                               # sensor_msgs/JointState
 
-A key or column path may go into a pickled object (``states.q``: the npz key ``states``, then
-its ``q``); loading a pickle runs code from the file, so it is read only with
+A key or column path may go into a pickled object (``states.x``: the npz key ``states``, then
+its ``x``); loading a pickle runs code from the file, so it is read only with
 ``allow_pickle: true`` (``--allow-pickle``).
 """
 
@@ -29,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.errors import SpecError
 from pipeline.importer.conventions import Conventions
-from pipeline.spec import RobotSpec
+from pipeline.spec import RobotSpec, Spec, build_spec, load_spec
 from pipeline.yamlfile import read_yaml
 
 FORMATS = ("csv", "parquet", "npz", "rosbag", "mcap")
@@ -55,6 +60,7 @@ class ImportMapping(BaseModel):
     dt: float | None = Field(default=None, gt=0, allow_inf_nan=False)
     q: str | list[str] = "q"
     v: str | list[str] = "v"
+    s_min_G: str | None = None
     quaternion: Literal["xyzw", "wxyz"] = "xyzw"
     velocity_frame: Literal["bus", "world"] = "bus"
     linear_velocity: Literal["origin", "bus_com"] = "origin"
@@ -98,3 +104,24 @@ def load_mapping(path: Path | None, overrides: dict[str, Any]) -> ImportMapping:
         field = ".".join(str(x) for x in err["loc"]) or "<root>"
         msg = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
         raise SpecError(f"{path or 'import options'}: field {field}: {msg}") from None
+
+
+def robot_block(mapping: ImportMapping, here: Path | None) -> tuple[RobotSpec, str, Path | None]:
+    """The robot the log is of: a spec's robot block (and that spec's folder, where its robot
+    file is looked for), or the mapping's own block."""
+    if mapping.robot is None:
+        raise SpecError("import: field robot: which robot the log is of is needed (--robot "
+                        "SPEC: a spec whose robot block is used, or a robot block in the "
+                        "mapping)")
+    if isinstance(mapping.robot, RobotSpec):
+        return mapping.robot, "the mapping's robot block", here
+    spec = load_spec(mapping.robot, here)
+    return spec.robot, f"spec {spec.name}", spec._here
+
+
+def import_spec(name: str, robot: RobotSpec, dt: float, rows: int, here: Path | None,
+                source: str) -> tuple[Spec, dict]:
+    """The imported log's spec: its robot and its step, nothing of a controller."""
+    content = {"robot": robot.model_dump(mode="json"),
+               "mission": {"dt": dt, "duration": rows * dt}}
+    return build_spec(name, content, source, here), content

@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 from pipeline.budget import Budget
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import TIME_UNITS, ImportMapping
+from pipeline.importer.selection import parse_selection, select
 
 NQ, NV = 13, 12
 # The import's peak memory over the size of the data it reads: measured 11x for a binary log
@@ -72,6 +73,7 @@ class RawLog:
     t_resolution: np.ndarray | None  # N, seconds: how finely each stamp is written
     q: np.ndarray  # N×13 in the log's conventions
     v: np.ndarray  # N×12
+    s_min_G: np.ndarray | None = None  # N: the source's own σ_min(Γ), where it logged one
 
 
 def float_resolution(t: np.ndarray, accumulated: bool = True) -> np.ndarray:
@@ -142,14 +144,32 @@ def _matrix(source: Path, name: str, value: Any, width: int) -> np.ndarray:
     return x
 
 
-def _vector(source: Path, field: str, spec: str | list[str], width: int, get) -> np.ndarray:
-    """One N×width array from a vector column (``spec`` a name) or ``width`` scalar ones."""
+def _vector(source: Path, field: str, spec: str | list[str], width: int, get,
+            positional=None) -> np.ndarray:
+    """One N×width array from a vector column or a selection of columns (``spec`` a text of
+    :mod:`pipeline.importer.selection`) or ``width`` scalar columns named."""
     if isinstance(spec, str):
-        return _matrix(source, f"{field} ({spec})", get(spec), width)
+        return _matrix(source, f"{field} ({spec})", select(source, field, spec, get,
+                                                           positional)[1], width)
     if len(spec) != width:
         raise SpecError(f"{source}: field {field}: {len(spec)} columns named, {width} needed")
     return _matrix(source, field, np.column_stack([np.asarray(get(c), dtype=float)
                                                    for c in spec]), width)
+
+
+def _scalar(source: Path, field: str, spec: str | None, get, positional=None
+            ) -> np.ndarray | None:
+    """One column of N finite numbers (a selection of one), or None when not mapped."""
+    if spec is None:
+        return None
+    x = _real_numbers(source, f"{field} ({spec})",
+                      select(source, field, spec, get, positional)[1]).astype(float)
+    if x.ndim != 1:
+        raise SpecError(f"{source}: {field} ({spec}): shape {x.shape}, expected N")
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise SpecError(f"{source}: {field} ({spec}): row {bad[0]} is not finite")
+    return x
 
 
 def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
@@ -175,17 +195,37 @@ def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
             raise SpecError(f"{source}: column {name!r} holds something that is not a "
                             f"number") from None
 
+    def positional(cols: slice | int) -> np.ndarray:
+        names = df.columns[cols]
+        return get(names) if isinstance(cols, int) else np.column_stack(
+            [get(c) for c in names]) if len(names) else np.zeros((len(df), 0))
+
     t = res = None
     if mapping.time is not None:
         scale = TIME_UNITS[mapping.time_unit]
-        t = _finite_stamps(source, mapping.time, get(mapping.time) * scale)
+        name = _csv_time_column(source, mapping.time, df.columns)
+        t = _finite_stamps(source, mapping.time, get(name) * scale)
         try:
-            res = (printed_resolution(df[mapping.time].str.strip().to_numpy()) * scale
+            res = (printed_resolution(df[name].str.strip().to_numpy()) * scale
                    + float_resolution(t))
         except ValueError as exc:
-            raise SpecError(f"{source}: column {mapping.time!r}: {exc}") from None
-    return RawLog(t, res, _vector(source, "q", mapping.q, NQ, get),
-                  _vector(source, "v", mapping.v, NV, get))
+            raise SpecError(f"{source}: column {name!r}: {exc}") from None
+    return RawLog(t, res, _vector(source, "q", mapping.q, NQ, get, positional),
+                  _vector(source, "v", mapping.v, NV, get, positional),
+                  _scalar(source, "s_min_G", mapping.s_min_G, get, positional))
+
+
+def _csv_time_column(source: Path, text: str, columns: pd.Index) -> str:
+    """The name of a CSV's time column: named, or one column by position (``[0]``)."""
+    sel = parse_selection(text, "time")
+    if sel.cols is None:
+        return sel.path
+    if sel.path or not isinstance(sel.cols, int):
+        raise SpecError(f"{source}: field time: {text!r}: a CSV's time is one of its columns, "
+                        f"by name or by position ([0])")
+    if not -len(columns) <= sel.cols < len(columns):
+        raise SpecError(f"{source}: field time: {text!r}: the file has {len(columns)} columns")
+    return str(columns[sel.cols])
 
 
 def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
@@ -220,16 +260,25 @@ def read_parquet(src: SourceBytes, mapping: ImportMapping) -> RawLog:
             raise SpecError(f"{source}: column {name!r}: rows of different lengths or "
                             f"nulls") from None
 
-    return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
-                  _vector(source, "v", mapping.v, NV, get))
+    def positional(cols: slice | int) -> np.ndarray:
+        names = table.column_names[cols]
+        return get(names) if isinstance(cols, int) else np.column_stack(
+            [get(c) for c in names]) if names else np.zeros((meta.num_rows, 0))
+
+    return RawLog(*_stamps(source, mapping, get, positional),
+                  _vector(source, "q", mapping.q, NQ, get, positional),
+                  _vector(source, "v", mapping.v, NV, get, positional),
+                  _scalar(source, "s_min_G", mapping.s_min_G, get, positional))
 
 
-def _stamps(source: Path, mapping: ImportMapping, get) -> tuple[np.ndarray | None,
-                                                                  float | None]:
-    """Time stamps in seconds and their resolution, from a binary column or key."""
+def _stamps(source: Path, mapping: ImportMapping, get, positional=None
+            ) -> tuple[np.ndarray | None, float | None]:
+    """Time stamps in seconds and their resolution, from a binary column or key (or a
+    selection of one column, :mod:`pipeline.importer.selection`)."""
     if mapping.time is None:
         return None, None
-    raw = _real_numbers(source, f"time ({mapping.time})", get(mapping.time))
+    raw = _real_numbers(source, f"time ({mapping.time})",
+                        select(source, "time", mapping.time, get, positional)[1])
     if raw.ndim != 1:
         raise SpecError(f"{source}: time ({mapping.time}): shape {raw.shape}, expected N")
     scale = TIME_UNITS[mapping.time_unit]
@@ -320,7 +369,8 @@ def read_npz(src: SourceBytes, mapping: ImportMapping) -> RawLog:
             return node
 
         return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
-                      _vector(source, "v", mapping.v, NV, get))
+                      _vector(source, "v", mapping.v, NV, get),
+                      _scalar(source, "s_min_G", mapping.s_min_G, get))
 
 
 def _holds(node: Any) -> str:

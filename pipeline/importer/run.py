@@ -32,11 +32,11 @@ from pipeline.errors import SpecError
 from pipeline.importer.bags import read_bag
 from pipeline.importer.consistency import check_conventions
 from pipeline.importer.conventions import Conventions
-from pipeline.importer.mapping import ImportMapping
+from pipeline.importer.mapping import ImportMapping, import_spec, robot_block
 from pipeline.importer.plausibility import check_joint_limits
 from pipeline.importer.readers import READERS, RawLog, read_bytes
 from pipeline.importer.timebase import TimeBase, even_time_base, resample
-from pipeline.logs import LogMeta, log_metadata, write_table
+from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, LogMeta, log_metadata, write_table
 from pipeline.paths import display_path
 from pipeline.provenance.keys import (
     SIM_LIBRARIES,
@@ -45,7 +45,7 @@ from pipeline.provenance.keys import (
     library_versions,
 )
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.spec import RobotSpec, Spec, build_spec, load_spec, spec_hash_of
+from pipeline.spec import RobotSpec, Spec, spec_hash_of
 
 NAME = re.compile(r"[A-Za-z0-9_.-]+")
 IMPORTED_VERSION = "imported"  # a log's sim_version when no simulator of this project made it
@@ -73,27 +73,6 @@ class ImportOutcome:
 
 def imported_log_path(logs: Path | str, name: str) -> Path:
     return artefact_paths.log_path(Path(logs) / artefact_paths.IMPORTED_FOLDER, name)
-
-
-def robot_block(mapping: ImportMapping, here: Path | None) -> tuple[RobotSpec, str, Path | None]:
-    """The robot the log is of: a spec's robot block (and that spec's folder, where its robot
-    file is looked for), or the mapping's own block."""
-    if mapping.robot is None:
-        raise SpecError("import: field robot: which robot the log is of is needed (--robot "
-                        "SPEC: a spec whose robot block is used, or a robot block in the "
-                        "mapping)")
-    if isinstance(mapping.robot, RobotSpec):
-        return mapping.robot, "the mapping's robot block", here
-    spec = load_spec(mapping.robot, here)
-    return spec.robot, f"spec {spec.name}", spec._here
-
-
-def import_spec(name: str, robot: RobotSpec, dt: float, rows: int, here: Path | None,
-                source: str) -> tuple[Spec, dict]:
-    """The imported log's spec: its robot and its step, nothing of a controller."""
-    content = {"robot": robot.model_dump(mode="json"),
-               "mission": {"dt": dt, "duration": rows * dt}}
-    return build_spec(name, content, source, here), content
 
 
 def _stamps(raw_t: np.ndarray | None, mapping: ImportMapping, n: int, source: Path
@@ -159,10 +138,14 @@ def write_import(prep: PreparedImport, path: Path) -> ImportOutcome:
     spec, content = import_spec(prep.name, prep.robot, time.dt, n, prep.robot_here,
                                 str(prep.source))
     sigma = np.array([_sigmas(prep.model_robot, qk) for qk in q])
+    if prep.raw.s_min_G is not None:  # the source's own: the provenance check is a check
+        sigma[:, 0] = prep.raw.s_min_G
     record = {"source": display_path(prep.source.resolve()),
               "source_sha256": prep.source_sha256, "format": prep.fmt,
               "mapping": prep.mapping.record(), "robot_from": prep.robot_from,
-              "import_key": prep.key, **record}
+              "import_key": prep.key,
+              "s_min_G_from": (S_MIN_G_REBUILT if prep.raw.s_min_G is None else
+                               S_MIN_G_SOURCE), **record}
     meta = LogMeta(spec={"name": prep.name, **content}, spec_hash=spec_hash_of(content),
                    sim_version=IMPORTED_VERSION, robot_file=display_path(spec.robot_path),
                    robot_hash=file_digest(spec.robot_path), status="complete",
@@ -203,6 +186,11 @@ def _converted(source: Path, raw: RawLog, mapping: ImportMapping, model_robot: G
     if len(raw.v) != n or (raw.t is not None and len(raw.t) != n):
         raise SpecError(f"{source}: t, q and v have {len(raw.t) if raw.t is not None else n}, "
                         f"{n} and {len(raw.v)} rows: not one log")
+    if raw.s_min_G is not None and len(raw.s_min_G) != n:
+        raise SpecError(f"{source}: s_min_G has {len(raw.s_min_G)} rows, q {n}: not one log")
+    if raw.s_min_G is not None and resample_dt is not None:
+        raise SpecError(f"{source}: --resample with the source's s_min_G: its values are of "
+                        f"the source's instants, not the resampled ones (map it, or resample)")
     for field, x in (("q", raw.q), ("v", raw.v)):
         bad = np.flatnonzero(~np.isfinite(x).all(axis=1))
         if bad.size:
@@ -262,6 +250,8 @@ def read_source(source: Path, mapping: ImportMapping, fmt: str, joints: list[str
     if fmt not in ("rosbag", "mcap"):
         src = read_bytes(source)
         return READERS[fmt](src, mapping), src.sha256
+    if mapping.s_min_G is not None:
+        raise SpecError(f"{source}: field s_min_G: a {fmt} log's topics hold no σ_min(Γ)")
     before = _bag_digest(source)
     raw = read_bag(source, mapping, fmt, joints)
     if _bag_digest(source) != before:

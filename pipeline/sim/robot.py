@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.sim import task_transform as tt
-from pipeline.sim.robot_file import RobotCard, load_robot_model, robot_card
+from pipeline.sim.robot_file import RobotCard, load_spec_robot, robot_card
 from pipeline.sim.sampling import Sampling, sigma_min_and_cond
 from pipeline.spec import Spec
 
@@ -76,8 +76,7 @@ class GiordanoRobot:
 
     def __init__(self, spec: Spec):
         self.spec = spec
-        self.model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
-                                      spec.robot.bus_inertia_scale)
+        self.model = load_spec_robot(spec)
         self.data = self.model.createData()
         self.frame_id = self.model.getFrameId(spec.robot.camera_frame)
         self.mass = float(pin.computeTotalMass(self.model))

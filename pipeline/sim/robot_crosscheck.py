@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
 
@@ -89,6 +89,7 @@ class CrossCheck:
     configurations: int
     max_diff: dict[str, float]
     tol: dict[str, float]
+    notes: list[str] = field(default_factory=list)  # e.g. a missing mesh the check did not need
 
 
 def cache_dir() -> Path:
@@ -99,29 +100,33 @@ def cache_dir() -> Path:
     return user_cache_dir() / "robot-crosscheck"
 
 
-def cache_key(path: Path, camera_frame: str) -> str:
-    """SHA-256 over the file's bytes, the camera frame, the pin and mujoco versions and this
-    module's source."""
+def cache_key(path: Path, camera_frame: str, package_dirs: tuple[Path, ...] = ()) -> str:
+    """SHA-256 over the file's bytes, the camera frame, the package folders, the pin and
+    mujoco versions and this module's source."""
     h = hashlib.sha256()
-    for part in (path.read_bytes(), camera_frame.encode(), pin.__version__.encode(),
-                 metadata.version("mujoco").encode(), Path(__file__).read_bytes()):
+    dirs = "\0".join(str(Path(d).resolve()) for d in package_dirs)
+    for part in (path.read_bytes(), camera_frame.encode(), dirs.encode(),
+                 pin.__version__.encode(), metadata.version("mujoco").encode(),
+                 Path(__file__).read_bytes()):
         h.update(hashlib.sha256(part).digest())
     return h.hexdigest()
 
 
-def crosscheck_robot_file(path: Path | str, model: pin.Model, camera_frame: str) -> CrossCheck:
+def crosscheck_robot_file(path: Path | str, model: pin.Model, camera_frame: str,
+                          package_dirs: tuple[Path, ...] = ()) -> CrossCheck:
     """Check ``model`` (Pinocchio's parse of ``path``) against MuJoCo's, once per file content.
+    ``package_dirs``: where ``package://`` mesh URIs are looked for (robot.package_dirs).
 
     Raises :class:`~pipeline.errors.SpecError` on a disagreement beyond round-off.
     """
     path = Path(path)
-    key = cache_key(path, camera_frame)
+    key = cache_key(path, camera_frame, package_dirs)
     stored = cache_dir() / f"{key}.json"
     try:
         return CrossCheck(**json.loads(stored.read_text()))
     except (OSError, ValueError, TypeError):
         pass
-    result = compare_parsers(path, model, camera_frame)
+    result = compare_parsers(path, model, camera_frame, package_dirs)
     try:
         from pipeline.atomic_files import atomic_write_text
 
@@ -133,22 +138,84 @@ def crosscheck_robot_file(path: Path | str, model: pin.Model, camera_frame: str)
 
 # -- MuJoCo's reading of the file -----------------------------------------------------------
 
-def mujoco_model(path: Path):
+def mujoco_model(path: Path, package_dirs: tuple[Path, ...] = ()):
     """MuJoCo's compile of ``path``: an MJCF as it is; a URDF through MuJoCo's importer with its
     fixed links kept as bodies (``fusestatic`` off, as Pinocchio keeps them as frames) and a
-    free joint added to the root link (the bus), as the loader adds Pinocchio's free flyer."""
+    free joint added to the root link (the bus), as the loader adds Pinocchio's free flyer.
+    Meshes are resolved as :func:`mujoco_spec` says."""
+    return mujoco_spec(path, package_dirs)[0].compile()
+
+
+def mujoco_spec(path: Path, package_dirs: tuple[Path, ...] = ()) -> tuple[object, list[str]]:
+    """MuJoCo's reading of ``path`` before it compiles, and what was left out of it: a mesh
+    file that is missing (or a ``package://`` URI that none of ``package_dirs`` holds) is not
+    needed for what the cross-parse compares (placements, masses, inertias) where its body's
+    inertia is explicit: its geoms are dropped, said in the returned notes. A body whose
+    inertia would come from its geoms (no explicit inertial) with a mesh missing is refused
+    naming the body: its mass is the mesh's."""
     import mujoco
 
-    if path.suffix.lower() not in URDF_SUFFIXES:
-        return mujoco.MjModel.from_xml_path(str(path))
-    spec = mujoco.MjSpec.from_file(str(path))
-    spec.compiler.fusestatic = False
-    spec.compiler.discardvisual = True
-    roots = list(spec.worldbody.bodies)
-    if len(roots) != 1:
-        raise SpecError(f"{path}: MuJoCo's URDF importer finds {len(roots)} root links, not one")
-    roots[0].add_freejoint(name="root_joint")
-    return spec.compile()
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:
+        first = (str(exc).strip().splitlines() or ["?"])[0]
+        raise SpecError(f"{path}: MuJoCo cannot read it ({first[:300]})") from None
+    if path.suffix.lower() in URDF_SUFFIXES:
+        spec.compiler.fusestatic = False
+        spec.compiler.discardvisual = True
+        roots = list(spec.worldbody.bodies)
+        if len(roots) != 1:
+            raise SpecError(f"{path}: MuJoCo's URDF importer finds {len(roots)} root links, "
+                            f"not one")
+        roots[0].add_freejoint(name="root_joint")
+    notes = _drop_missing_meshes(spec, path, package_dirs)
+    return spec, notes
+
+
+def _mesh_file(spec, mesh, path: Path, package_dirs: tuple[Path, ...]) -> Path | None:
+    """Where a mesh's file is, or None when it is not there."""
+    name = mesh.file
+    if name.startswith("package://"):
+        rest = name.removeprefix("package://")
+        package, _, inside = rest.partition("/")
+        for d in package_dirs:
+            for cand in (d / package / inside, d / rest, d / inside):
+                if cand.is_file():
+                    mesh.file = str(cand.resolve())
+                    return cand
+        return None
+    base = Path(spec.modelfiledir or path.parent) / (spec.meshdir or "")
+    cand = Path(name) if Path(name).is_absolute() else base / name
+    return cand if cand.is_file() else None
+
+
+def _drop_missing_meshes(spec, path: Path, package_dirs: tuple[Path, ...]) -> list[str]:
+    import mujoco
+
+    notes = []
+    from_geoms = spec.compiler.inertiafromgeom != mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    for mesh in list(spec.meshes):
+        if _mesh_file(spec, mesh, path, package_dirs) is not None:
+            continue
+        users = [g for g in spec.geoms if g.meshname == mesh.name]
+        for g in users:
+            body = g.parent
+            forced = spec.compiler.inertiafromgeom == \
+                mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+            if from_geoms and (forced or not body.explicitinertial):
+                raise SpecError(f"{path}: body {body.name!r}: its inertia comes from its "
+                                f"geoms, and its mesh {mesh.file!r} is missing (give the body "
+                                f"an explicit inertial, or the mesh"
+                                + (", robot.package_dirs for package:// URIs"
+                                   if mesh.file.startswith("package://") else "") + ")")
+        owners = sorted({g.parent.name for g in users})
+        for g in users:
+            spec.delete(g)
+        spec.delete(mesh)
+        notes.append(f"mesh {mesh.file} missing, not needed: "
+                     + (f"the inertia of {', '.join(owners)} is explicit" if owners else
+                        "no geom uses it"))
+    return notes
 
 
 @dataclass
@@ -164,13 +231,16 @@ class _Pair:
     joints: dict[str, tuple[int, int]]  # joint, joint (the free flyer: the free joint)
     sites: dict[str, tuple[int, int]]  # OP_FRAME, site
     camera: tuple[str, str]  # ("site" | "body", its name)
+    notes: list[str]  # what MuJoCo's reading left out (missing meshes not needed)
 
 
-def _pair(path: Path, model: pin.Model, camera_frame: str) -> _Pair:
+def _pair(path: Path, model: pin.Model, camera_frame: str,
+          package_dirs: tuple[Path, ...] = ()) -> _Pair:
     import mujoco
 
+    spec, notes = mujoco_spec(path, package_dirs)
     try:
-        mj = mujoco_model(path)
+        mj = spec.compile()
     except ValueError as exc:  # MuJoCo's compile error
         first = (str(exc).strip().splitlines() or ["?"])[0]
         raise SpecError(f"{path}: MuJoCo cannot compile it ({first[:200]}); "
@@ -203,7 +273,7 @@ def _pair(path: Path, model: pin.Model, camera_frame: str) -> _Pair:
         raise SpecError(f"{path}: MuJoCo finds no site or body {camera_frame!r} "
                         "(robot.camera_frame)")
     return _Pair(path, model, model.createData(), mj, mujoco.MjData(mj), bodies, joints, sites,
-                 camera)
+                 camera, notes)
 
 
 def _set_mujoco(p: _Pair, q: np.ndarray) -> np.ndarray:
@@ -416,9 +486,10 @@ def _mass_matrix(p: _Pair, c: _Diffs, q: np.ndarray, T: np.ndarray, where: str) 
             shown=(M[k], M_mj[k]))
 
 
-def compare_parsers(path: Path, model: pin.Model, camera_frame: str) -> CrossCheck:
+def compare_parsers(path: Path, model: pin.Model, camera_frame: str,
+                    package_dirs: tuple[Path, ...] = ()) -> CrossCheck:
     """Compare Pinocchio's ``model`` of ``path`` with MuJoCo's compile of it (no cache)."""
-    p = _pair(path, model, camera_frame)
+    p = _pair(path, model, camera_frame, package_dirs)
     c = _Diffs(path)
     rng = np.random.default_rng(SEED + 1)
     confs = configurations(model)
@@ -432,4 +503,4 @@ def compare_parsers(path: Path, model: pin.Model, camera_frame: str) -> CrossChe
         file=str(path), sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
         pin=pin.__version__, mujoco=metadata.version("mujoco"), camera_frame=camera_frame,
         bodies=sorted(p.bodies), joints=list(p.joints), sites=sorted(p.sites),
-        configurations=len(confs), max_diff=c.max_diff, tol=c.tol)
+        configurations=len(confs), max_diff=c.max_diff, tol=c.tol, notes=p.notes)

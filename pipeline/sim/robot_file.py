@@ -12,7 +12,12 @@ robot in the file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,26 +25,64 @@ import pinocchio as pin
 
 from pipeline.errors import SpecError
 from pipeline.sim.robot_crosscheck import crosscheck_robot_file
+from pipeline.spec import Spec
 
 MJCF_SUFFIXES = (".xml", ".mjcf")
 N_JOINTS = 6
 
 
 def _parse(path: Path) -> pin.Model:
-    try:
-        if path.suffix.lower() in MJCF_SUFFIXES:
-            return pin.buildModelFromMJCF(str(path))
-        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    except Exception as exc:  # Pinocchio raises RuntimeError, ValueError or its own kinds
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise SpecError(f"{path}: not a loadable robot file ({first[:200]})") from None
+    """Pinocchio's model of the file. The C++ parsers write their reasons to the process's
+    stderr (urdfdom's "Error: XML_ERROR_PARSING … Line number=1"): caught here, so that a
+    refusal is one line holding the parser's whole reason, and a parse that succeeds with
+    remarks says them in one warning line."""
+    with _stderr_of_c_code() as said:
+        try:
+            if path.suffix.lower() in MJCF_SUFFIXES:
+                model = pin.buildModelFromMJCF(str(path))
+            else:
+                model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        except Exception as exc:  # Pinocchio raises RuntimeError, ValueError or its own kinds
+            error = exc
+        else:
+            error = None
+    reason = " ".join(" ".join(said()).split())
+    if error is not None:
+        message = " ".join(str(error).split()) or type(error).__name__
+        detail = f"{message}; the parser said: {reason}" if reason else message
+        raise SpecError(f"{path}: not a loadable robot file ({detail[:600]})")
+    if reason:
+        print(f"warning: {path}: the robot file's parser said: {reason[:600]}",
+              file=sys.stderr)
+    return model
+
+
+@contextmanager
+def _stderr_of_c_code() -> Iterator[Callable[[], list[str]]]:
+    """Capture what native code writes to file descriptor 2 (Python's own sys.stderr is
+    flushed first and is unaffected); yields a function returning the captured lines."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    lines: list[str] = []
+    with tempfile.TemporaryFile() as buf:
+        os.dup2(buf.fileno(), 2)
+        try:
+            yield lambda: lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            buf.seek(0)
+            lines += buf.read().decode(errors="replace").splitlines()
 
 
 def load_robot_model(path: Path | str, camera_frame: str,
-                     bus_inertia_scale: float = 1.0) -> pin.Model:
+                     bus_inertia_scale: float = 1.0,
+                     package_dirs: tuple[Path, ...] = ()) -> pin.Model:
     """The Pinocchio model of a robot file, gravity off, validated (eq. 1).
 
-    The parse is cross-checked against MuJoCo's (:func:`crosscheck_robot_file`) before
+    The parse is cross-checked against MuJoCo's (:func:`crosscheck_robot_file`; meshes are
+    needed only for a body whose inertia comes from them, ``package://`` URIs are looked for in
+    ``package_dirs``) before
     ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body on the free
     joint about its own centre of mass (its mass and centre of mass stay): the check is about
     the file.
@@ -56,13 +99,20 @@ def load_robot_model(path: Path | str, camera_frame: str,
                         f"({len(kinds) - 1} arm joints)")
     if not model.existFrame(camera_frame):
         raise SpecError(f"{path}: no frame {camera_frame!r} (robot.camera_frame)")
-    crosscheck_robot_file(path, model, camera_frame)
+    crosscheck_robot_file(path, model, camera_frame, package_dirs)
     model.gravity.setZero()
     if bus_inertia_scale != 1.0:
         bus = model.inertias[1]
         model.inertias[1] = pin.Inertia(bus.mass, bus.lever.copy(),
                                         bus_inertia_scale * bus.inertia)
     return model
+
+
+def load_spec_robot(spec: Spec) -> pin.Model:
+    """The model of a spec's robot block: :func:`load_robot_model` with its file, camera frame,
+    bus inertia scale and package folders."""
+    return load_robot_model(spec.robot_path, spec.robot.camera_frame,
+                            spec.robot.bus_inertia_scale, spec.package_dirs)
 
 
 @dataclass(frozen=True)
@@ -91,6 +141,9 @@ class RobotCard:
     D_o: float = 0.0  # camera orientation damping gain, N·m·s/rad
     mu_roll: float = 0.0  # D_o / I_roll, 1/s
     dt_star_roll: float = 0.0  # 2 / mu_roll, s
+    # The file's bodies welded to the free joint, whose masses and inertias the bus body above
+    # sums (a fixed arm base adds to the bus: μ_bus is not the user's bus alone).
+    bus_links: list[str] = field(default_factory=list)
 
 
 def _joint_axis(model: pin.Model, j: int) -> np.ndarray:
@@ -156,4 +209,6 @@ def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
         I_zz_bus=I_axis, D_b=float(D_b), mu_bus=mu, dt_star_bus=2.0 / mu,
         roll_axis_offset=roll_offset, roll_boresight_cos=cos, roll_camera_offset=cam_offset,
         I_roll=I_roll, D_o=float(D_o), mu_roll=mu_roll,
-        dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"))
+        dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"),
+        bus_links=[f.name for f in model.frames
+                   if f.type == pin.FrameType.BODY and f.parentJoint == 1])

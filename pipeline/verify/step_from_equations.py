@@ -17,7 +17,7 @@ import pinocchio as pin
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from pipeline.sim.robot_file import load_robot_model
+from pipeline.sim.robot_file import load_spec_robot
 from pipeline.spec import Spec
 
 
@@ -29,8 +29,7 @@ class Robot:
     """A fresh Pinocchio model of the spec's robot, and Γ of eq. 1 from its definition."""
 
     def __init__(self, spec: Spec):
-        self.model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
-                                      spec.robot.bus_inertia_scale)
+        self.model = load_spec_robot(spec)
         self.data = self.model.createData()
         self.fid = self.model.getFrameId(spec.robot.camera_frame)
         self.mass = sum(inertia.mass for inertia in self.model.inertias)
