@@ -463,9 +463,11 @@ def test_a_damaged_file_is_one_line_exit_2_from_the_command(nominal, tmp_path):
 def test_a_file_over_the_memory_budget_is_refused_before_it_is_read(nominal, tmp_path,
                                                                       monkeypatch):
     cols, _ = nominal
+    from pipeline.importer.readers import parquet_decoded_size
+
     src = _written(tmp_path, cols["q"], cols["v"], cols["t"])
-    data = sum(pq.ParquetFile(src).metadata.row_group(i).total_byte_size
-               for i in range(pq.ParquetFile(src).metadata.num_row_groups))
+    data = parquet_decoded_size(pq.ParquetFile(src).metadata)
+    assert data >= 8 * 26 * len(cols["t"])  # t, 13 + 12 doubles a row, and list offsets
     # A budget of 5 copies of the data: under the 12 the import needs at its peak.
     monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", repr(5 * data / 2**30))
     with pytest.raises(SpecError, match=r"importing it needs about 12× that, over the memory "
@@ -473,6 +475,29 @@ def test_a_file_over_the_memory_budget_is_refused_before_it_is_read(nominal, tmp
         import_log(src, _mapping(), "x", tmp_path / "logs")
     monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", repr(13 * data / 2**30))
     import_log(src, _mapping(), "x", tmp_path / "logs")
+
+
+def test_a_parquet_file_is_bounded_by_its_decoded_size_not_its_encoded_one(nominal, tmp_path,
+                                                                             monkeypatch):
+    """A robot at rest for 20 000 rows: run-length encoding makes the footer's total_byte_size
+    a small fraction of the data (10⁷ such rows: 158 MB against 2.1 GB, and an import that grew
+    past 12 GB before this bound). A budget between 12× the encoded and 12× the decoded size
+    refuses it, before a row is read."""
+    from pipeline.importer.readers import parquet_decoded_size
+
+    cols, _ = nominal
+    n = 20_000
+    q = np.repeat(cols["q"][:1], n, axis=0)
+    src = tmp_path / "rest.parquet"
+    pq.write_table(pa.table({"t": np.arange(n) * 0.03, "q": list(q), "v": list(np.zeros((n, 12)))}),
+                   src)
+    meta = pq.ParquetFile(src).metadata
+    encoded = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+    decoded = parquet_decoded_size(meta)
+    assert decoded > 5 * encoded
+    monkeypatch.setenv("BREVE_MEMORY_BUDGET_GB", repr(12 * (encoded + decoded) / 2 / 2**30))
+    with pytest.raises(SpecError, match="MiB decoded of data"):
+        import_log(src, _mapping(), "rest", tmp_path / "logs")
 
 
 def test_a_missing_attribute_is_named_with_what_the_object_holds(nominal, tmp_path):

@@ -47,21 +47,22 @@ class SourceBytes:
 
 
 def read_bytes(source: Path) -> SourceBytes:
-    """The file's bytes and their SHA-256, refused over the memory budget before they are read
-    (a regular file, by its size) or as soon as they pass it (a pipe)."""
-    limit = int(Budget.from_environment().memory_bytes // IMPORT_COPIES)
+    """The file's bytes and their SHA-256, refused when they alone would not fit the memory
+    budget: before they are read (a regular file, by its size) or as soon as they pass it (a
+    pipe). What its data need once decoded is each format's check (:func:`check_size`)."""
+    limit = int(Budget.from_environment().memory_bytes)
     try:
         with open(source, "rb") as fh:
             st = os.fstat(fh.fileno())
-            if stat.S_ISREG(st.st_mode):
-                check_size(source, st.st_size)
+            if stat.S_ISREG(st.st_mode) and st.st_size > limit:
+                check_size(source, st.st_size, copies=1)
             data = fh.read(limit + 1)
     except IsADirectoryError:
         raise SpecError(f"{source}: a folder, not a log file (a ROS 2 bag's folder is "
                         f"--format rosbag)") from None
     except OSError as exc:
         raise SpecError(f"{source}: cannot read: {exc.strerror or exc}") from None
-    check_size(source, len(data))
+    check_size(source, len(data), copies=1)
     return SourceBytes(source, data, hashlib.sha256(data).hexdigest())
 
 
@@ -174,6 +175,7 @@ def _scalar(source: Path, field: str, spec: str | None, get, positional=None
 
 def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
     source = src.path
+    check_size(source, len(src.data))  # a CSV's text is larger than its numbers: conservative
     try:
         df = pd.read_csv(io.BytesIO(src.data), dtype=str, skipinitialspace=True,
                          keep_default_na=False)
@@ -228,6 +230,26 @@ def _csv_time_column(source: Path, text: str, columns: pd.Index) -> str:
     return str(columns[sel.cols])
 
 
+# Bytes per value of a Parquet physical type once decoded (a boolean becomes a byte).
+_PHYSICAL_WIDTH = {"BOOLEAN": 1, "INT32": 4, "FLOAT": 4, "INT64": 8, "DOUBLE": 8, "INT96": 12}
+
+
+def parquet_decoded_size(meta: pq.FileMetaData) -> int:
+    """The bytes a Parquet file's values take once decoded, from its footer, before a row is
+    read: each column chunk's value count times its type's width (a text or byte column's
+    uncompressed size). Not the footer's ``total_byte_size``: that is the *encoded* size, and
+    run-length and dictionary encoding make it a hundredth of the data (10⁷ rows of a robot
+    at rest: 158 MB encoded, 2.1 GB decoded)."""
+    total = 0
+    for i in range(meta.num_row_groups):
+        rg = meta.row_group(i)
+        for j in range(rg.num_columns):
+            c = rg.column(j)
+            width = _PHYSICAL_WIDTH.get(c.physical_type)
+            total += c.num_values * width if width else c.total_uncompressed_size
+    return total
+
+
 def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
     if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type) \
             or pa.types.is_large_list(col.type):
@@ -240,9 +262,7 @@ def read_parquet(src: SourceBytes, mapping: ImportMapping) -> RawLog:
     try:
         pf = pq.ParquetFile(pa.BufferReader(src.data))
         meta = pf.metadata
-        # The uncompressed size from the footer, before a row is read.
-        check_size(source, sum(meta.row_group(i).total_byte_size
-                               for i in range(meta.num_row_groups)), "decompressed")
+        check_size(source, parquet_decoded_size(meta), "decoded")
         if meta.num_rows == 0:
             raise SpecError(f"{source}: no rows")
         table = pf.read()
@@ -389,15 +409,17 @@ def _holds(node: Any) -> str:
     return f"{kind} " + ", ".join(f"{k} ({what(x)})" for k, x in list(items.items())[:20])
 
 
-def check_size(source: Path, nbytes: int, what: str = "") -> None:
+def check_size(source: Path, nbytes: int, what: str = "", copies: int = IMPORT_COPIES) -> None:
     """Refuse a file whose data would not fit the memory budget of ``run`` (pipeline.budget),
     before it is read: the import holds about IMPORT_COPIES copies of the data at its peak
-    (measured, docs/importing.md)."""
+    (measured, docs/importing.md); the file's own bytes, read once, are one copy."""
     budget = Budget.from_environment().memory_bytes
-    if nbytes * IMPORT_COPIES > budget:
+    if nbytes * copies > budget:
+        need = (f"importing it needs about {copies}× that" if copies > 1 else
+                "the file alone is")
         raise SpecError(f"{source}: {nbytes / 2**20:,.0f} MiB {what + ' ' if what else ''}of "
-                        f"data; importing it needs about {IMPORT_COPIES}× that, over the memory "
-                        f"budget of {budget / 2**30:.3g} GiB (BREVE_MEMORY_BUDGET_GB)")
+                        f"data; {need}, over the memory budget of {budget / 2**30:.3g} GiB "
+                        f"(BREVE_MEMORY_BUDGET_GB)")
 
 
 READERS = {"csv": read_csv, "parquet": read_parquet, "npz": read_npz}
