@@ -82,7 +82,8 @@ def _cmd_import(a: argparse.Namespace) -> int:
              "q": columns(a.q), "v": columns(a.v), "quaternion": a.quaternion,
              "velocity_frame": a.velocity_frame, "linear_velocity": a.linear_velocity,
              "angle_unit": a.angle_unit, "length_unit": a.length_unit,
-             "allow_pickle": a.allow_pickle or None, "time": a.time}
+             "allow_pickle": a.allow_pickle or None, "time": a.time,
+             "max_jitter": a.max_jitter}
     options = {k: v for k, v in given.items() if v is not None}
     if a.time == "none":  # a log without stamps: its step is --dt
         options["time"] = None
@@ -383,6 +384,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="of joint angles and angular rates (default: rad; e.g. --angle-unit deg)")
     im.add_argument("--length-unit", choices=("m", "mm"),
                     help="of positions and linear velocities (default: m; e.g. --length-unit mm)")
+    im.add_argument("--max-jitter", type=float, metavar="FRACTION",
+                    help="stamps may lie this fraction of the step off t0 + k·dt beyond their "
+                    "resolution, below 0.25 (telemetry stamped as published): the log is "
+                    "analysed at its own instants, one row per step, recorded (default: 0; "
+                    "e.g. --max-jitter 0.1)")
     im.add_argument("--resample", type=float, metavar="DT",
                     help="resample onto this fixed step, recorded (default: an uneven time "
                     "base is refused; e.g. --resample 0.03)")

@@ -94,6 +94,7 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
     scaled[:, 6:] *= 1.00001
     keep = np.r_[0:200, 201:len(t)]
     jitter = t + np.where(np.arange(len(t)) == 50, 1e-6, 0.0)
+    wander = t + np.random.default_rng(36).uniform(-0.1, 0.1, len(t)) * 0.03
     quat = q.copy()
     quat[:, 3:7] = q[:, [6, 3, 4, 5]]
     files = {
@@ -117,6 +118,7 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
     _parquet(b / "quat.parquet", t, quat, v)
     _parquet(b / "gap.parquet", t[keep], q[keep], v[keep])
     _parquet(b / "jitter.parquet", jitter, q, v)
+    _parquet(b / "wander.parquet", wander, q, v)
     big = np.array([2**63 + 5 + k * 30_000_000 for k in range(len(t))], dtype=object)
     pq.write_table(pa.table({"t": pa.array(big.astype(np.uint64)), "q": list(q),
                              "v": list(v)}), b / "uint64.parquet")
@@ -277,6 +279,11 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
         Case("quaternion w first", _imp(b / "quat.parquet", "x"), 2, "quaternion order"),
         Case("a dropped row", _imp(b / "gap.parquet", "x"), 2, "gap.parquet: uneven time base"),
         Case("one stamp jittered 1 µs", _imp(b / "jitter.parquet", "x"), 2, "jitter: row 50"),
+        Case("stamps jittered ±0.1·dt, --max-jitter 0.15",
+             _imp(b / "wander.parquet", "w", "--max-jitter", "0.15"), 0, "rows at dt 0.03",
+             same_as_source("w")),
+        Case("--max-jitter 0.25", _imp(b / "wander.parquet", "x", "--max-jitter", "0.25"), 2,
+             "max_jitter"),
         Case("--resample 1e-9", _imp(b / "gap.parquet", "x", "--resample", "1e-9"), 2,
              "over the memory budget"),
         Case("--resample 1000", _imp(b / "gap.parquet", "x", "--resample", "1000"), 2,

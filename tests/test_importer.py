@@ -940,3 +940,33 @@ def test_a_bad_robot_is_refused_before_the_log_is_read_in_one_line(tmp_path):
     assert "broken.urdf: not a loadable robot file" in r.stderr
     assert "the parser said: Error: Error=XML_ERROR_PARSING" in r.stderr
     assert not (tmp_path / "logs").exists()
+
+
+# -- telemetry stamped as published (issue 33, item 8) -----------------------------------------
+
+def test_jittered_stamps_are_analysed_at_their_own_instants_within_a_stated_bound(nominal,
+                                                                                  tmp_path):
+    """The seed's own log with its stamps jittered by up to 0.1·dt (uniform, seeded), as a
+    telemetry stamps rows when it publishes them: refused as uneven by default (naming
+    --max-jitter), accepted with --max-jitter 0.15, the bound and the measured deviation
+    recorded, and every data-stage number that of the unjittered log (the rows are the same
+    samples; nothing was resampled). Resampling the same log instead changes the ripple."""
+    cols, original = nominal
+    rng = np.random.default_rng(33)
+    dt = 0.03
+    t = cols["t"] + rng.uniform(-0.1, 0.1, len(cols["t"])) * dt
+    src = _written(tmp_path, cols["q"], cols["v"], t)
+    with pytest.raises(SpecError, match=r"uneven time base: jitter: .*--max-jitter FRACTION"):
+        import_log(src, _mapping(), "j", tmp_path / "logs")
+    with pytest.raises(SpecError, match=r"uneven time base: jitter: .*jitter allowed \(0\.05"):
+        import_log(src, _mapping(max_jitter=0.05), "j", tmp_path / "logs")
+    done = import_log(src, _mapping(max_jitter=0.15), "j", tmp_path / "logs")
+    time = verify_log(done.path).meta.imported["time"]
+    assert time["jitter_bound"] == 0.15 and 0.05 * dt < time["max_deviation"] <= 0.2 * dt
+    assert time["resampled_from"] is None
+    _same_data_stages(_analyse(done.path, tmp_path / "rep"), original)
+    resampled = import_log(src, _mapping(), "r", tmp_path / "logs", resample_dt=dt)
+    rec = _analyse(resampled.path, tmp_path / "rep")
+    assert rec.bus_rate.alternating_rms < 0.99 * original.bus_rate.alternating_rms
+    with pytest.raises(SpecError, match="max_jitter"):
+        _mapping(max_jitter=0.25)

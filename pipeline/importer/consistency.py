@@ -156,12 +156,14 @@ def bus_bracket(xi_a: np.ndarray, xi_b: np.ndarray) -> np.ndarray:
     return np.hstack([np.cross(w_a, v_b) - np.cross(w_b, v_a), np.cross(w_a, w_b)])
 
 
-def residuals(model: pin.Model, q: np.ndarray, v: np.ndarray, dt: float | np.ndarray
-              ) -> Residuals:
+def residuals(model: pin.Model, q: np.ndarray, v: np.ndarray, dt: float | np.ndarray,
+              dt_rel: float = 0.0) -> Residuals:
     """r_k and its bound for every step of (q, v) in the project's conventions (eq. 33);
     ``dt``: the step, or each step's length (N − 1) for stamps that are not even. A gap (a
     step over 1.5 times the median step: rows missing) is not a step of the integrator and is
-    left out."""
+    left out. ``dt_rel``: how uncertain the step itself is, relative (a nominal step drawn
+    from jittered stamps): it scales every d_k alike, so the bound and each block's allowance
+    grow by that share of d."""
     n = len(q)
     if n < 3:
         raise ValueError("the consistency check needs at least 3 rows")
@@ -174,26 +176,27 @@ def residuals(model: pin.Model, q: np.ndarray, v: np.ndarray, dt: float | np.nda
     group = dt / 12.0 * np.linalg.norm(bus_bracket(v[:-1, :6], v[1:, :6]), axis=1)
     size = np.maximum(np.abs(q[:-1]).max(axis=1), np.abs(q[1:]).max(axis=1))
     rounding = ROUNDING_ULPS * np.finfo(float).eps * np.maximum(size, 1.0) / dt
-    bound = curvature + group + rounding
+    bound = curvature + group + rounding + dt_rel * np.linalg.norm(d, axis=1)
     step = np.broadcast_to(np.asarray(dt, dtype=float), r.shape)
     k = step <= GAP_STEPS * np.median(step)
     rounding = np.broadcast_to(rounding, r.shape)
     return Residuals(r[k], bound[k], np.linalg.norm(v[:-1], axis=1)[k],
                      tuple(block_scale(name, d[k, b], v[:-1][k, b], v[1:][k, b],
-                                       float(np.sqrt(np.mean(rounding[k] ** 2))))
+                                       float(np.sqrt(np.mean(rounding[k] ** 2))), dt_rel)
                            for name, b in BLOCKS))
 
 
-def block_scale(name: str, d: np.ndarray, a: np.ndarray, b: np.ndarray, rounding: float
-                ) -> BlockScale:
-    """d ≈ α a + β b by least squares over every step and component of one block."""
+def block_scale(name: str, d: np.ndarray, a: np.ndarray, b: np.ndarray, rounding: float,
+                dt_rel: float = 0.0) -> BlockScale:
+    """d ≈ α a + β b by least squares over every step and component of one block; the step's
+    own relative uncertainty ``dt_rel`` moves α + β by as much, allowed."""
     A = np.c_[a.reshape(-1), b.reshape(-1)]
     y = d.reshape(-1)
     w = np.linalg.lstsq(A, y, rcond=None)[0]
     rms = float(np.sqrt(np.mean(y**2)))
     resid = float(np.sqrt(np.mean((y - A @ w) ** 2)))
-    return BlockScale(name, float(w.sum()), abs(float(w.sum()) - 1.0) * rms, resid + rounding,
-                      rms)
+    return BlockScale(name, float(w.sum()), abs(float(w.sum()) - 1.0) * rms,
+                      resid + rounding + dt_rel * rms, rms)
 
 
 # -- which conventions the data support ------------------------------------------------------
@@ -261,7 +264,7 @@ class ConsistencyCheck:
 
 
 def check_conventions(model: pin.Model, q_raw: np.ndarray, v_raw: np.ndarray,
-                      declared: Conventions, dt: float | np.ndarray
+                      declared: Conventions, dt: float | np.ndarray, dt_rel: float = 0.0
                       ) -> tuple[ConsistencyCheck, Converted]:
     """The consistency of a foreign log's q and v in its declared conventions and in every
     alternative (eq. 33), and the log converted in the declared ones."""
@@ -269,7 +272,7 @@ def check_conventions(model: pin.Model, q_raw: np.ndarray, v_raw: np.ndarray,
 
     def fit(conv: Conventions) -> tuple[ConventionFit, Converted]:
         c = to_project(q_raw, v_raw, conv, bus_com)
-        return ConventionFit(conv, residuals(model, c.q, c.v, dt)), c
+        return ConventionFit(conv, residuals(model, c.q, c.v, dt, dt_rel)), c
 
     first, converted = fit(declared)
     others = [fit(c)[0] for c in declared.alternatives(float(np.linalg.norm(bus_com)))]

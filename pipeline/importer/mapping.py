@@ -5,6 +5,7 @@ each field also an option of ``python -m pipeline import``).
     robot: nominal           # a spec (name or file) whose robot block is used, or the block
     time: t                  # the time stamps' column or key; or `dt:` for a log without one
     time_unit: s             # s | ms | us | ns
+    max_jitter: 0            # stamps' jitter allowed beyond their resolution, × dt (< 0.25)
     q: q                     # one vector column/key (13 wide), a selection of columns
                              # ("states.x[:, 0:13]", pipeline/importer/selection.py), or a
                              # list of 13 scalar columns
@@ -58,6 +59,9 @@ class ImportMapping(BaseModel):
     time: str | None = "t"
     time_unit: Literal["s", "ms", "us", "ns"] = "s"
     dt: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    # The stamps' jitter allowed beyond their resolution, a fraction of the step (below 0.25):
+    # a telemetry stamped as published is analysed at its own instants, never resampled.
+    max_jitter: float = Field(default=0.0, ge=0, lt=0.25)
     q: str | list[str] = "q"
     v: str | list[str] = "v"
     s_min_G: str | None = None

@@ -199,10 +199,14 @@ def _converted(source: Path, raw: RawLog, mapping: ImportMapping, model_robot: G
     res = raw.t_resolution if raw.t_resolution is not None else 0.0
     steps = np.diff(t)
     if n < 3 or np.any(steps <= 0):
-        even_time_base(t, res, str(source))  # names the problem
-
+        even_time_base(t, res, str(source), mapping.max_jitter)  # names the problem
+    dt_rel = 0.0
+    if mapping.max_jitter > 0:  # stamped as published: one row per step of the nominal dt,
+        nominal = (t[-1] - t[0]) / (n - 1)  # known to the two end stamps' jitter
+        steps = np.full(n - 1, nominal)
+        dt_rel = 2 * (mapping.max_jitter * nominal + float(np.max(res))) / (t[-1] - t[0])
     check, converted = check_conventions(model_robot.model, raw.q, raw.v,
-                                         mapping.conventions, steps)
+                                         mapping.conventions, steps, dt_rel)
     # Before the consistency verdict: a joint in degrees in both q and v is one motion still,
     # and this names it where the check would name a symptom.
     check_joint_limits(model_robot.model, converted.q, mapping.angle_unit, source)
@@ -218,7 +222,7 @@ def _converted(source: Path, raw: RawLog, mapping: ImportMapping, model_robot: G
         time = TimeBase(0.0, float(mapping.dt), 0.0, 0.0)
     else:
         try:
-            time = even_time_base(t, res, str(source))
+            time = even_time_base(t, res, str(source), mapping.max_jitter)
         except SpecError:
             if resample_dt is None:
                 raise

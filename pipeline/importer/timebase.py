@@ -23,6 +23,9 @@ from pipeline.errors import SpecError
 from pipeline.importer.readers import IMPORT_COPIES
 
 GAP_STEPS = 1.5  # a step this many times dt or longer is rows missing, not jitter
+# Jitter of a quarter step or more lets a step of one row reach 1.5·dt, a dropped row's
+# 2·dt − 2·jitter come down to it: the two could not be told apart.
+MAX_JITTER = 0.25
 
 
 @dataclass(frozen=True)
@@ -32,17 +35,27 @@ class TimeBase:
     max_deviation: float  # s, the largest |t_k − t_0 − k·dt|
     resolution: float  # s, how finely the stamps are written (the coarsest row's)
     resampled_from: int | None = None  # the source's row count, when resampled
+    jitter_bound: float = 0.0  # the stamps' allowed jitter beyond their resolution, × dt
+    rms_deviation: float = 0.0  # s, the RMS of |t_k − t_0 − k·dt|
 
     def record(self) -> dict:
         return {"t0": self.t0, "dt": self.dt, "max_deviation": self.max_deviation,
-                "resolution": self.resolution, "resampled_from": self.resampled_from}
+                "resolution": self.resolution, "resampled_from": self.resampled_from,
+                "jitter_bound": self.jitter_bound, "rms_deviation": self.rms_deviation}
 
 
-def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> TimeBase:
+def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str,
+                   jitter: float = 0.0) -> TimeBase:
     """The log's fixed step, or a SpecError naming the first row off it. ``resolution``: how
     finely each stamp is written; row k may lie its own, t_0's and t_{N−1}'s resolution off
-    t_0 + k·dt (dt is drawn from those two). A step over GAP_STEPS·dt (rows missing) or under
-    dt/GAP_STEPS (a row too many) is refused whatever the resolution."""
+    t_0 + k·dt (dt is drawn from those two), and ``jitter``·dt more (a telemetry's stamps,
+    published late or early by up to that: one row per step still, analysed at its own
+    instants). A step over GAP_STEPS·dt (rows missing) or under dt/GAP_STEPS (a row too many)
+    is refused whatever the resolution: with jitter below MAX_JITTER a step of one row lies
+    within (1 ± 2·jitter)·dt, apart from both."""
+    if not 0.0 <= jitter < MAX_JITTER:
+        raise SpecError(f"--max-jitter {jitter:g}: a fraction of the step in [0, {MAX_JITTER:g})"
+                        f": beyond it a jittered step cannot be told from a dropped row")
     n = len(t)
     if n < 3:
         raise SpecError(f"{what}: {n} rows: an analysis needs at least 3")
@@ -56,7 +69,7 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> 
                         f"{t[k]!r})")
     dt = (t[-1] - t[0]) / (n - 1)
     res = np.broadcast_to(np.asarray(resolution, dtype=float), t.shape)
-    tol = res + res[0] + res[-1]
+    tol = res + res[0] + res[-1] + jitter * dt
     dev = np.abs(t - t[0] - np.arange(n) * dt)
     worst = float(dev.max())
     gap = steps / dt
@@ -68,13 +81,16 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str) -> 
             label = "a gap of" if gap[odd[0]] > 1 else "a row too many: a step of"
             detail = f"{label} {gap[odd[0]]:.3g} steps before row {odd[0] + 1}"
         else:  # no step out of range: the stamps wander, beyond their own resolution
+            allowed = (f" and the jitter allowed ({jitter:g}·dt)" if jitter else
+                       " (--max-jitter FRACTION analyses it at its own instants)")
             detail = (f"jitter: row {k} is {t[k] - t[0] - k * dt:+.3g} s off t0 + k·dt, "
-                      f"beyond the stamps' resolution")
+                      f"beyond the stamps' resolution{allowed}")
         raise SpecError(f"{what}: uneven time base: {detail} (dt {dt:.6g} s, stamps written "
                         f"to {float(res.max()):.2g} s; steps from {steps.min():.6g} to "
                         f"{steps.max():.6g} s): give --resample DT to resample (recorded), "
                         f"nothing is resampled silently")
-    return TimeBase(float(t[0]), float(dt), worst, float(res.max()))
+    return TimeBase(float(t[0]), float(dt), worst, float(res.max()), None, jitter,
+                    float(np.sqrt(np.mean(dev**2))))
 
 
 def resample(model: pin.Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: float,
