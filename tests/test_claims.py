@@ -120,19 +120,26 @@ def test_a_current_register_is_reused_with_the_same_lines_and_exit_code(tmp_path
     assert "claims: started" in forced.stderr and forced.stdout == first.stdout
 
 
+def _evaluated_on_copies(tmp_path: Path, cid: str):
+    """A one-claim register (``cid``: the nominal run's lag-1 below −0.5) evaluated on copies
+    of the shared test runs (they stay whole): (register, logs, out, the first evaluation)."""
+    b = built()
+    logs = tmp_path / "logs"
+    for name in ("t_nominal", "t_dt010"):
+        shutil.copytree(b.logs / name, logs / name)
+    path = claims_file(tmp_path, [claim(cid, "nominal:dominant.lag1", "lt", -0.5)], logs=logs)
+    out = tmp_path / "out"
+    first = run_cli("claims", "--claims", path, "--out", out)
+    assert first.returncode == 0, first.stderr
+    return path, logs, out, first
+
+
 # one victim in the fast set; the others, about 6 s each, with the slow tests
 @pytest.mark.parametrize("victim", ["log", *(pytest.param(v, marks=pytest.mark.slow)
                                             for v in ("analysis", "claims.json", "CLAIMS.md",
                                                       "key"))])
 def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
-    b = built()
-    logs = tmp_path / "logs"  # a copy: the shared test runs stay whole
-    for name in ("t_nominal", "t_dt010"):
-        shutil.copytree(b.logs / name, logs / name)
-    path = claims_file(tmp_path, [claim("R3", "nominal:dominant.lag1", "lt", -0.5)], logs=logs)
-    out = tmp_path / "out"
-    first = run_cli("claims", "--claims", path, "--out", out)
-    assert first.returncode == 0, first.stderr
+    path, logs, out, first = _evaluated_on_copies(tmp_path, "R3")
     target = {"log": logs / "t_nominal" / "run.parquet",
               "analysis": out / "t_nominal" / "analysis.json", "claims.json": out / "claims.json",
               "CLAIMS.md": out / "CLAIMS.md", "key": out / ".claims-key"}[victim]
@@ -148,14 +155,7 @@ def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
 def test_a_hand_edited_analysis_is_not_believed_by_the_claims(tmp_path):
     """An analysis.json whose number is edited (still whole, well-typed JSON) is made again
     from its log: the claim reads the analysis' value, never the edit (issue 36, item 2)."""
-    b = built()
-    logs = tmp_path / "logs"
-    for name in ("t_nominal", "t_dt010"):
-        shutil.copytree(b.logs / name, logs / name)
-    path = claims_file(tmp_path, [claim("R4", "nominal:dominant.lag1", "lt", -0.5)], logs=logs)
-    out = tmp_path / "out"
-    first = run_cli("claims", "--claims", path, "--out", out)
-    assert first.returncode == 0, first.stderr
+    path, _, out, first = _evaluated_on_copies(tmp_path, "R4")
     target = out / "t_nominal" / "analysis.json"
     record = json.loads(target.read_text())
     measured = record["dominant"]["lag1"]

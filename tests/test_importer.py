@@ -970,3 +970,19 @@ def test_jittered_stamps_are_analysed_at_their_own_instants_within_a_stated_boun
     assert rec.bus_rate.alternating_rms < 0.99 * original.bus_rate.alternating_rms
     with pytest.raises(SpecError, match="max_jitter"):
         _mapping(max_jitter=0.25)
+
+
+def test_the_jitter_bound_holds_a_row_against_the_jittered_end_stamps():
+    """Row 1 published J·dt late, t_0 J·dt early: it lies 2·J·dt (less the end stamps' line's
+    share) off t_0 + k·dt, within a jitter of J, not of 0.9·J (a bound of J alone would refuse
+    stamps each within J of their instant)."""
+    from pipeline.importer.timebase import even_time_base
+
+    dt, J, n = 0.03, 0.1, 1000
+    t = np.arange(n) * dt
+    t[0] -= J * dt
+    t[1] += J * dt
+    tb = even_time_base(t, 0.0, "x", jitter=J)
+    assert tb.max_deviation == pytest.approx(2 * J * dt, rel=2e-3) and tb.jitter_bound == J
+    with pytest.raises(SpecError, match="jitter allowed"):
+        even_time_base(t, 0.0, "x", jitter=0.9 * J)

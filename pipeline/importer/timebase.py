@@ -48,11 +48,11 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str,
                    jitter: float = 0.0) -> TimeBase:
     """The log's fixed step, or a SpecError naming the first row off it. ``resolution``: how
     finely each stamp is written; row k may lie its own, t_0's and t_{N−1}'s resolution off
-    t_0 + k·dt (dt is drawn from those two), and ``jitter``·dt more (a telemetry's stamps,
-    published late or early by up to that: one row per step still, analysed at its own
-    instants). A step over GAP_STEPS·dt (rows missing) or under dt/GAP_STEPS (a row too many)
-    is refused whatever the resolution: with jitter below MAX_JITTER a step of one row lies
-    within (1 ± 2·jitter)·dt, apart from both."""
+    t_0 + k·dt (dt is drawn from those two), and 2·``jitter``·dt more (a telemetry's stamps,
+    each published late or early by up to jitter·dt, the line through the end stamps too: one
+    row per step still, analysed at its own instants). A step over GAP_STEPS·dt (rows
+    missing) or under dt/GAP_STEPS (a row too many) is refused whatever the resolution: with
+    jitter below MAX_JITTER a step of one row lies within (1 ± 2·jitter)·dt, apart from both."""
     if not 0.0 <= jitter < MAX_JITTER:
         raise SpecError(f"--max-jitter {jitter:g}: a fraction of the step in [0, {MAX_JITTER:g})"
                         f": beyond it a jittered step cannot be told from a dropped row")
@@ -69,7 +69,9 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str,
                         f"{t[k]!r})")
     dt = (t[-1] - t[0]) / (n - 1)
     res = np.broadcast_to(np.asarray(resolution, dtype=float), t.shape)
-    tol = res + res[0] + res[-1] + jitter * dt
+    # Jitter as the resolution: row k's own, and t_0's and t_{N−1}'s through the reference
+    # line, ε_k − (1 − f) ε_0 − f ε_{N−1} with f = k/(N − 1): at most 2·jitter·dt.
+    tol = res + res[0] + res[-1] + 2 * jitter * dt
     dev = np.abs(t - t[0] - np.arange(n) * dt)
     worst = float(dev.max())
     gap = steps / dt
