@@ -90,3 +90,30 @@ def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
     for p in left:
         p.kill()
     assert left == [], [p.cmdline() for p in left]
+
+
+@pytest.mark.slow
+def test_kill_9_of_a_sweep_leaves_no_dask_worker(tmp_path):
+    """Dask's worker processes end when the process that holds their nanny dies (distributed
+    watches its parent); measured here, not assumed."""
+    cmd = [sys.executable, "-m", "pipeline", "sweep", "nominal", "--set",
+           "mission.dt=0.02,0.021,0.022,0.023", "--workers", "2", "--logs",
+           str(tmp_path / "logs"), "--out", str(tmp_path / "out")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            cwd=PROJECT_ROOT)
+    me = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    workers: list[psutil.Process] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = [c for c in me.children(recursive=True) if "spawn_main" in _cmdline(c)]
+        if len(workers) >= 2:
+            break
+        time.sleep(0.1)
+    assert len(workers) >= 2, "the sweep's workers never started"
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    left = _gone_within(workers, GRACE_S)
+    for p in left:
+        p.kill()
+    assert left == [], [_cmdline(p) for p in left]
