@@ -587,9 +587,13 @@ def test_an_imported_log_changed_after_the_import_is_refused(nominal, tmp_path, 
 
 def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
                drop_joint_row: int | None = None, reorder_from: int | None = None,
-               no_velocity: bool = False) -> None:
+               no_velocity: bool = False, jitter: np.ndarray | None = None,
+               imu_tf: bool = False) -> None:
     """A bag of nav_msgs/Odometry (/bus/odom) and sensor_msgs/JointState (/arm/joint_states,
-    joints in ``joint_order``), stamped at an epoch time in nanoseconds, written with rosbags."""
+    joints in ``joint_order``), stamped at an epoch time in nanoseconds (each row ``jitter``
+    seconds late), written with rosbags. ``imu_tf``: the bus's angular rate on a
+    sensor_msgs/Imu topic (/imu) and its pose on /tf (world → bus, among another transform),
+    as a ROS 2 robot publishes them, the odometry's pose and angular rate left at zero."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -601,8 +605,12 @@ def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
         odom = w.add_connection("/bus/odom", "nav_msgs/msg/Odometry", typestore=ts)
         joints = w.add_connection("/arm/joint_states", "sensor_msgs/msg/JointState",
                                   typestore=ts)
+        if imu_tf:
+            imu = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
+            tf = w.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
         for row, (t, q, v) in enumerate(zip(cols["t"], cols["q"], cols["v"], strict=True)):
-            ns = 1_764_000_000 * 10**9 + round(t * 1e9)
+            late = 0.0 if jitter is None else float(jitter[row])
+            ns = 1_764_000_000 * 10**9 + round((t + late) * 1e9)
             header = T["std_msgs/msg/Header"](
                 stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
                 frame_id="world")
@@ -610,6 +618,26 @@ def _write_bag(path: Path, cols: dict, storage: str, joint_order: list[int],
                 position=T["geometry_msgs/msg/Point"](*q[:3]),
                 orientation=T["geometry_msgs/msg/Quaternion"](x=q[3], y=q[4], z=q[5], w=q[6]))
             twist = T["geometry_msgs/msg/Twist"](linear=vec(*v[:3]), angular=vec(*v[3:6]))
+            if imu_tf:
+                quat = T["geometry_msgs/msg/Quaternion"]
+                stamped = [T["geometry_msgs/msg/TransformStamped"](
+                    header=T["std_msgs/msg/Header"](stamp=header.stamp, frame_id=parent),
+                    child_frame_id=child, transform=T["geometry_msgs/msg/Transform"](
+                        translation=vec(*xyz), rotation=quat(x=r[0], y=r[1], z=r[2], w=r[3])))
+                    for parent, child, xyz, r in (("bus", "camera_mount", (0, 0, 0.3),
+                                                   (0, 0, 0, 1)),
+                                                  ("world", "bus", q[:3], q[3:7]))]
+                w.write(tf, ns, ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](
+                    transforms=stamped), "tf2_msgs/msg/TFMessage"))
+                w.write(imu, ns, ts.serialize_cdr(T["sensor_msgs/msg/Imu"](
+                    header=T["std_msgs/msg/Header"](stamp=header.stamp, frame_id="bus"),
+                    orientation=quat(x=0, y=0, z=0, w=1), orientation_covariance=np.zeros(9),
+                    angular_velocity=vec(*v[3:6]), angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=vec(0, 0, 0),
+                    linear_acceleration_covariance=np.zeros(9)), "sensor_msgs/msg/Imu"))
+                pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](0, 0, 0),
+                                                   orientation=quat(x=0, y=0, z=0, w=1))
+                twist = T["geometry_msgs/msg/Twist"](linear=vec(*v[:3]), angular=vec(0, 0, 0))
             msg = T["nav_msgs/msg/Odometry"](
                 header=header, child_frame_id="bus",
                 pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
@@ -641,6 +669,34 @@ def test_a_ros2_bag_written_here_is_imported_and_analysed(nominal, tmp_path, sto
     assert rec.origin.format == ("rosbag" if storage == "sqlite3" else "mcap")
     _same_data_stages(rec, original)
     assert rec.prediction.agrees and rec.prediction.modes[0].measured.rings
+
+
+def test_a_bag_of_jittered_imu_and_tf_topics_is_analysed_at_its_own_instants(nominal, tmp_path):
+    """As a ROS 2 robot publishes (issue 33, item 8): the bus pose on /tf (world → bus, beside
+    another transform), its angular rate on /imu, the odometry's pose and angular rate left at
+    zero, every row stamped as published, up to 0.1·dt late or early. Read from TF and the IMU
+    at its own instants (--max-jitter 0.15), the data stages are the original log's; read from
+    the odometry alone, the same bag has a bus at rest and no ripple: the topics named are the
+    ones read."""
+    cols, original = nominal
+    jitter = np.random.default_rng(8).uniform(-0.1, 0.1, len(cols["t"])) * 0.03
+    bag = tmp_path / "bag"
+    _write_bag(bag, cols, "mcap", list(range(6)), jitter=jitter, imu_tf=True)
+    topics = {"odometry": "/bus/odom", "joints": "/arm/joint_states", "imu": "/imu",
+              "tf": "/tf", "tf_parent": "world", "tf_child": "bus"}
+    with pytest.raises(SpecError, match="uneven time base: jitter"):
+        import_log(bag, _mapping(topics=topics), "imu", tmp_path / "logs")
+    done = import_log(bag, _mapping(topics=topics, max_jitter=0.15), "imu", tmp_path / "logs")
+    time = verify_log(done.path).meta.imported["time"]
+    assert time["jitter_bound"] == 0.15 and time["max_deviation"] > 0.05 * 0.03
+    _same_data_stages(_analyse(done.path, tmp_path / "rep"), original)
+    odometry_only = {"odometry": "/bus/odom", "joints": "/arm/joint_states"}
+    odom = import_log(bag, _mapping(topics=odometry_only, max_jitter=0.15), "odom",
+                      tmp_path / "logs")
+    assert _analyse(odom.path, tmp_path / "rep").bus_rate.alternating_rms == 0.0
+    assert original.bus_rate.alternating_rms > 0.1
+    with pytest.raises(SpecError, match="tf needs tf_parent and tf_child"):
+        _mapping(topics={**odometry_only, "tf": "/tf"})
 
 
 def test_bag_topics_stamped_apart_are_refused(nominal, tmp_path):

@@ -19,7 +19,8 @@ each field also an option of ``python -m pipeline import``).
     angle_unit: rad          # rad | deg (joint angles and rates, the bus angular velocity)
     length_unit: m           # m | mm
     topics: {odometry: /bus/odom, joints: /arm/joint_states}   # bags: nav_msgs/Odometry and
-                                                              # sensor_msgs/JointState
+                                                              # sensor_msgs/JointState; and
+                             # imu: /imu (ω_b), tf: /tf with tf_parent, tf_child (the pose)
 
 A key or column path may go into a pickled object (``states.x``: the npz key ``states``, then
 its ``x``); loading a pickle runs code from the file, so it is read only with
@@ -31,7 +32,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.errors import SpecError
 from pipeline.importer.conventions import Conventions
@@ -45,10 +46,25 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
 
 class Topics(BaseModel):
+    """A bag's topics: the bus's pose and twist from one nav_msgs/Odometry, unless its pose
+    comes from TF (``tf`` with the transform ``tf_parent`` → ``tf_child``) or its angular rate
+    from an IMU (``imu``: sensor_msgs/Imu, its angular velocity in the bus frame); the arm's
+    from sensor_msgs/JointState."""
+
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     odometry: str = Field(min_length=1)  # nav_msgs/Odometry: the bus pose and twist
     joints: str = Field(min_length=1)  # sensor_msgs/JointState: the arm's angles and rates
+    imu: str | None = Field(default=None, min_length=1)  # sensor_msgs/Imu: ω_b
+    tf: str | None = Field(default=None, min_length=1)  # tf2_msgs/TFMessage: the bus pose
+    tf_parent: str | None = Field(default=None, min_length=1)  # its world frame id
+    tf_child: str | None = Field(default=None, min_length=1)  # its bus frame id
+
+    @model_validator(mode="after")
+    def _tf_frames(self) -> Topics:
+        if self.tf is not None and (self.tf_parent is None or self.tf_child is None):
+            raise ValueError("tf needs tf_parent and tf_child (the world and bus frame ids)")
+        return self
 
 
 class ImportMapping(BaseModel):
