@@ -38,6 +38,7 @@ from pipeline.errors import LogError, PipelineError, RunFailed, SpecError
 from pipeline.importer.mapping import ImportMapping
 from pipeline.importer.run import (
     ImportOutcome,
+    check_name,
     imported_log_path,
     prepare_import,
     write_import,
@@ -231,9 +232,10 @@ class ArtefactStore:
         the log there reused if it is this import and whole, refused (SpecError naming it) if
         it is another unless ``force``, else written; a killed import's temporary files are
         removed. ``here``: the mapping file's folder."""
+        check_name(name)  # before the name makes a path
         path = imported_log_path(self.logs, name)
-        prep = prepare_import(source, mapping, name, resample_dt, here)
         check_contained(self.logs, path.parent)
+        prep = prepare_import(source, mapping, name, resample_dt, here)
         with folder_lock(path.parent):
             remove_stale_temps(path.parent)
             held = None if force or not path.exists() else self._held_import(path)
