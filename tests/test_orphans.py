@@ -67,13 +67,11 @@ def test_a_worker_ends_with_the_process_that_started_it(tmp_path):
     assert alive["watch"] == [] and len(alive["control"]) == 1
 
 
-@pytest.mark.slow
-def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
-    out = tmp_path / "rep"
-    shutil.copytree(built().reports, out)
-    cmd = [sys.executable, "-m", "pipeline", "report", "--out", str(out), "--force"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env={**os.environ, "PYTHONPATH": str(PROJECT_ROOT)})
+def _workers_left_after_kill_9(cmd: list[str], what: str, **popen) -> list[psutil.Process]:
+    """Start ``cmd``, wait until two spawned worker processes of it run, kill -9 the command
+    and return the workers still running GRACE_S later (killed then, so none outlives the
+    test)."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, **popen)
     me = psutil.Process(proc.pid)
     deadline = time.monotonic() + 120
     workers: list[psutil.Process] = []
@@ -82,14 +80,24 @@ def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
         if len(workers) >= 2:
             break
         time.sleep(0.1)
-    assert len(workers) >= 2, "the figure processes never started"
-    time.sleep(1.0)  # drawing
+    assert len(workers) >= 2, f"the {what} never started"
+    time.sleep(1.0)  # at work
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     left = _gone_within(workers, GRACE_S)
     for p in left:
         p.kill()
-    assert left == [], [p.cmdline() for p in left]
+    return left
+
+
+@pytest.mark.slow
+def test_kill_9_of_report_leaves_no_figure_process(tmp_path):
+    out = tmp_path / "rep"
+    shutil.copytree(built().reports, out)
+    cmd = [sys.executable, "-m", "pipeline", "report", "--out", str(out), "--force"]
+    left = _workers_left_after_kill_9(cmd, "figure processes",
+                                      env={**os.environ, "PYTHONPATH": str(PROJECT_ROOT)})
+    assert left == [], [_cmdline(p) for p in left]
 
 
 @pytest.mark.slow
@@ -99,21 +107,5 @@ def test_kill_9_of_a_sweep_leaves_no_dask_worker(tmp_path):
     cmd = [sys.executable, "-m", "pipeline", "sweep", "nominal", "--set",
            "mission.dt=0.02,0.021,0.022,0.023", "--workers", "2", "--logs",
            str(tmp_path / "logs"), "--out", str(tmp_path / "out")]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            cwd=PROJECT_ROOT)
-    me = psutil.Process(proc.pid)
-    deadline = time.monotonic() + 120
-    workers: list[psutil.Process] = []
-    while time.monotonic() < deadline and proc.poll() is None:
-        workers = [c for c in me.children(recursive=True) if "spawn_main" in _cmdline(c)]
-        if len(workers) >= 2:
-            break
-        time.sleep(0.1)
-    assert len(workers) >= 2, "the sweep's workers never started"
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    left = _gone_within(workers, GRACE_S)
-    for p in left:
-        p.kill()
+    left = _workers_left_after_kill_9(cmd, "sweep's workers", cwd=PROJECT_ROOT)
     assert left == [], [_cmdline(p) for p in left]
