@@ -69,12 +69,16 @@ class RobotSpec(_Block):
     # the MuJoCo cross-parse only; a mesh it does not find is not needed where its body's
     # inertia is explicit. Pinocchio's model never reads a mesh: out of the spec hash.
     package_dirs: list[str] = Field(default_factory=list)
+    # Joints of the file held at a value (rad, or m for a prismatic one): a gripper's jaw, a
+    # finger, a joint the mission does not use. The arm is the joints left (eq. 1); q_bar
+    # gives one angle per arm joint, checked against the file when the robot is loaded.
+    locked_joints: dict[str, Finite] = Field(default_factory=dict)
 
     @field_validator("q_bar")
     @classmethod
-    def _six(cls, v: list[float]) -> list[float]:
-        if len(v) != 6:
-            raise ValueError(f"needs 6 joint angles, got {len(v)}")
+    def _some(cls, v: list[float]) -> list[float]:
+        if not v:
+            raise ValueError("needs one joint angle per arm joint, got none")
         return v
 
 
@@ -312,6 +316,9 @@ def spec_hash_of(content: dict[str, Any]) -> str:
     for block, key in INERT_FIELDS:
         if isinstance(d.get(block), dict):
             d[block] = {k: v for k, v in d[block].items() if k != key}
+    # No locked joints is the spec as it was before the field: its hash is unchanged.
+    if isinstance(d.get("robot"), dict) and d["robot"].get("locked_joints") == {}:
+        d["robot"] = {k: v for k, v in d["robot"].items() if k != "locked_joints"}
     return canonical_hash(d)
 
 

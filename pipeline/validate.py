@@ -107,7 +107,8 @@ def report_lines(v: Validation) -> list[str]:
             f"1/s, dt·μ_roll = {m.dt * c.mu_roll:.3g} (I_roll = {c.I_roll:.4g} kg·m² about the "
             f"last joint's axis; its CoM {c.roll_axis_offset:.2g} m and the camera "
             f"{c.roll_camera_offset:.2g} m from the axis, boresight |cos| "
-            f"{c.roll_boresight_cos:.6f}: exact when both offsets are 0 and |cos| = 1)"]
+            f"{c.roll_boresight_cos:.6f}: exact when both offsets are 0 and |cos| = 1)",
+            *([f"  warning: {c.light_bus}"] if c.light_bus else [])]
 
 
 def _loop_words(integrator: str, delay: int, dt_mu: float) -> str:

@@ -23,6 +23,7 @@ from conftest import run_cli
 from pipeline.errors import OutputError, SpecError
 from pipeline.importer.mapping import load_mapping
 from pipeline.logs import verify_log
+from pipeline.shapes import RobotShape
 from pipeline.store.door import import_log
 
 
@@ -111,7 +112,7 @@ def test_a_bag_changed_while_it_is_read_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(run_module, "read_bag", read_while_recording)
     with pytest.raises(SpecError, match="changed while it was read"):
         run_module.read_source(bag, _mapping(topics={"odometry": "/o", "joints": "/j"}),
-                               "mcap", [])
+                               "mcap", RobotShape(()))
 
 
 # -- item 6: one import per name ---------------------------------------------------------------

@@ -82,7 +82,7 @@ def _chain(n_joints: int, free: bool = True, site: str = "camera") -> str:
 
 @pytest.mark.parametrize("name,text,needle", [
     ("garbage.xml", "this is not XML <<<", "not a loadable robot file"),
-    ("five.xml", _chain(5), "nq = 12, nv = 11 (5 arm joints)"),
+    ("five.xml", _chain(5), "5 arm joints (j0, j1, j2, j3, j4) to the camera frame"),
     ("nocam.xml", _chain(6, site="lens"), "no frame 'camera'"),
     ("nofree.xml", _chain(6, free=False), "root joint must be a free joint"),
     ("garbage.urdf", "<robot name='x'><link name='a'/><joint", "not a loadable robot file"),

@@ -99,8 +99,8 @@ def read_bag(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) 
     # From the first stamp: exact to the tick, then one rounding (an epoch stamp in seconds
     # would keep only ~0.2 µs). Stamps are nanoseconds whatever the mapping's time_unit says.
     t = (ns - ns[0]) * 1e-9 if len(ns) else ns * 1e-9
-    return RawLog(t, 0.5e-9 + float_resolution(t, accumulated=False), q.reshape(-1, 13),
-                  v.reshape(-1, 12))
+    return RawLog(t, 0.5e-9 + float_resolution(t, accumulated=False),
+                  q.reshape(-1, 7 + len(joints)), v.reshape(-1, 6 + len(joints)))
 
 
 def _stamped(msg, topic: str, tp) -> list[tuple[int, object]]:

@@ -55,7 +55,7 @@ ROUNDING_ULPS = 1024
 
 
 BLOCKS = (("the bus's linear velocity", slice(0, 3)), ("the bus's angular velocity", slice(3, 6)),
-          ("the joint rates", slice(6, 12)))
+          ("the joint rates", slice(6, None)))
 
 
 @dataclass(frozen=True)

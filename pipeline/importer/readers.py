@@ -28,8 +28,8 @@ from pipeline.budget import Budget
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import TIME_UNITS, ImportMapping
 from pipeline.importer.selection import parse_selection, select
+from pipeline.shapes import RobotShape
 
-NQ, NV = 13, 12
 # The import's peak memory over the size of the data it reads: measured 11x for a binary log
 # (docs/importing.md, "Size and memory"); a CSV's text is larger than its numbers, so the same
 # factor over its file size is conservative.
@@ -173,7 +173,7 @@ def _scalar(source: Path, field: str, spec: str | None, get, positional=None
     return x
 
 
-def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+def read_csv(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) -> RawLog:
     source = src.path
     check_size(source, len(src.data))  # a CSV's text is larger than its numbers: conservative
     try:
@@ -212,8 +212,8 @@ def read_csv(src: SourceBytes, mapping: ImportMapping) -> RawLog:
                    + float_resolution(t))
         except ValueError as exc:
             raise SpecError(f"{source}: column {name!r}: {exc}") from None
-    return RawLog(t, res, _vector(source, "q", mapping.q, NQ, get, positional),
-                  _vector(source, "v", mapping.v, NV, get, positional),
+    return RawLog(t, res, _vector(source, "q", mapping.q, shape.nq, get, positional),
+                  _vector(source, "v", mapping.v, shape.nv, get, positional),
                   _scalar(source, "s_min_G", mapping.s_min_G, get, positional))
 
 
@@ -257,7 +257,7 @@ def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
     return col.to_numpy()
 
 
-def read_parquet(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+def read_parquet(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) -> RawLog:
     source = src.path
     try:
         pf = pq.ParquetFile(pa.BufferReader(src.data))
@@ -286,8 +286,8 @@ def read_parquet(src: SourceBytes, mapping: ImportMapping) -> RawLog:
             [get(c) for c in names]) if names else np.zeros((meta.num_rows, 0))
 
     return RawLog(*_stamps(source, mapping, get, positional),
-                  _vector(source, "q", mapping.q, NQ, get, positional),
-                  _vector(source, "v", mapping.v, NV, get, positional),
+                  _vector(source, "q", mapping.q, shape.nq, get, positional),
+                  _vector(source, "v", mapping.v, shape.nv, get, positional),
                   _scalar(source, "s_min_G", mapping.s_min_G, get, positional))
 
 
@@ -351,7 +351,7 @@ def _check_npz(src: SourceBytes) -> None:
                         ) from None
 
 
-def read_npz(src: SourceBytes, mapping: ImportMapping) -> RawLog:
+def read_npz(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) -> RawLog:
     source = src.path
     _check_npz(src)
     try:
@@ -388,8 +388,9 @@ def read_npz(src: SourceBytes, mapping: ImportMapping) -> RawLog:
                                     f"{_holds(node)})")
             return node
 
-        return RawLog(*_stamps(source, mapping, get), _vector(source, "q", mapping.q, NQ, get),
-                      _vector(source, "v", mapping.v, NV, get),
+        return RawLog(*_stamps(source, mapping, get),
+                      _vector(source, "q", mapping.q, shape.nq, get),
+                      _vector(source, "v", mapping.v, shape.nv, get),
                       _scalar(source, "s_min_G", mapping.s_min_G, get))
 
 

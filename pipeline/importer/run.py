@@ -44,7 +44,9 @@ from pipeline.provenance.keys import (
     import_version,
     library_versions,
 )
+from pipeline.shapes import RobotShape
 from pipeline.sim.robot import GiordanoRobot
+from pipeline.sim.robot_file import robot_shape
 from pipeline.spec import RobotSpec, Spec, spec_hash_of
 
 NAME = re.compile(r"[A-Za-z0-9_.-]+")
@@ -124,7 +126,7 @@ def prepare_import(source: Path | str, mapping: ImportMapping, name: str,
     # (here 1 s) is not the model's: the spec is made again with the log's below.
     model_spec = import_spec(name, robot, 1.0, 1, robot_here, str(source))[0]
     model_robot = GiordanoRobot(model_spec)
-    raw, source_sha256 = read_source(source, mapping, fmt, list(model_robot.model.names)[2:])
+    raw, source_sha256 = read_source(source, mapping, fmt, robot_shape(model_robot.model))
     key = import_key(source_sha256, fmt, mapping, model_spec, resample_dt)
     return PreparedImport(source, name, fmt, mapping, robot, robot_from, robot_here,
                           model_robot, raw, source_sha256, resample_dt, key)
@@ -243,21 +245,22 @@ def _converted(source: Path, raw: RawLog, mapping: ImportMapping, model_robot: G
     return time, q, v, record
 
 
-def read_source(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]
+def read_source(source: Path, mapping: ImportMapping, fmt: str, shape: RobotShape
                 ) -> tuple[RawLog, str]:
-    """The foreign log's t, q and v, read as the mapping says (a bag's reader matches the
-    arm's ``joints`` by name), and the SHA-256 of the bytes they were read from: a file is
-    read once and parsed from those bytes; a bag (a folder, or an MCAP file its reader seeks
-    in) is hashed before and after it is read, and refused if it changed meanwhile."""
+    """The foreign log's t, q and v, read as the mapping says, sized by the robot's ``shape``
+    (a bag's reader matches the arm's joints by name), and the SHA-256 of the bytes they were
+    read from: a file is read once and parsed from those bytes; a bag (a folder, or an MCAP
+    file its reader seeks in) is hashed before and after it is read, and refused if it changed
+    meanwhile."""
     if not source.exists():
         raise SpecError(f"{source}: file not found")
     if fmt not in ("rosbag", "mcap"):
         src = read_bytes(source)
-        return READERS[fmt](src, mapping), src.sha256
+        return READERS[fmt](src, mapping, shape), src.sha256
     if mapping.s_min_G is not None:
         raise SpecError(f"{source}: field s_min_G: a {fmt} log's topics hold no σ_min(Γ)")
     before = _bag_digest(source)
-    raw = read_bag(source, mapping, fmt, joints)
+    raw = read_bag(source, mapping, fmt, list(shape.joints))
     if _bag_digest(source) != before:
         raise SpecError(f"{source}: changed while it was read (its SHA-256 before and after "
                         f"differ): import it again once it is written")

@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.sim import task_transform as tt
-from pipeline.sim.robot_file import RobotCard, load_spec_robot, robot_card
+from pipeline.sim.robot_file import RobotCard, camera_frame_id, load_spec_robot, robot_card
 from pipeline.sim.sampling import Sampling, sigma_min_and_cond
 from pipeline.spec import Spec
 
@@ -78,7 +78,7 @@ class GiordanoRobot:
         self.spec = spec
         self.model = load_spec_robot(spec)
         self.data = self.model.createData()
-        self.frame_id = self.model.getFrameId(spec.robot.camera_frame)
+        self.frame_id = camera_frame_id(self.model, spec.robot.camera_frame)
         self.mass = float(pin.computeTotalMass(self.model))
         self.n = self.model.nv - 6
         self.sampling = Sampling(spec.config_sampling)

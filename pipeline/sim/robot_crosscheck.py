@@ -242,8 +242,8 @@ def _pair(path: Path, model: pin.Model, camera_frame: str,
     try:
         mj = spec.compile()
     except ValueError as exc:  # MuJoCo's compile error
-        first = (str(exc).strip().splitlines() or ["?"])[0]
-        raise SpecError(f"{path}: MuJoCo cannot compile it ({first[:200]}); "
+        reason = " ".join(str(exc).split()) or "?"
+        raise SpecError(f"{path}: MuJoCo cannot compile it ({reason[:600]}); "
                         "the cross-parse needs it") from None
 
     def mj_id(kind, name: str) -> int:
@@ -369,6 +369,13 @@ INERTIA_CAUSE = ("the parsers read the inertial data differently (an inertial fr
                  "fullinertia order, a compiler inertia option, or a body merged elsewhere)")
 
 
+def mujoco_slide() -> int:
+    """MuJoCo's code of a slide (prismatic) joint."""
+    import mujoco
+
+    return int(mujoco.mjtJoint.mjJNT_SLIDE)
+
+
 def _placements(p: _Pair, c: _Diffs, where: str) -> None:
     """World placements: the bodies from the root down (the first to disagree points at the
     cause), then the sites (the camera frame first), then the joints (anchor, world axis).
@@ -396,6 +403,11 @@ def _placements(p: _Pair, c: _Diffs, where: str) -> None:
         if i == 1:
             continue
         axis, r = d.xaxis[j], data.oMi[i].translation - d.xanchor[j]
+        if p.mj.jnt_type[j] == mujoco_slide():
+            # A slide joint's axis is its twist's linear part; it has no line of its own.
+            c.check("axis", f"the world axis of joint {n!r}", data.J[:3, model.joints[i].idx_v],
+                    axis, 1.0, where, "", TREE_CAUSE)
+            continue
         c.check("axis", f"the world axis of joint {n!r}", data.J[3:, model.joints[i].idx_v],
                 axis, 1.0, where, "", TREE_CAUSE)
         # Any point of the axis line is the same joint: the anchors' offset across the axis.

@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,11 +24,11 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
+from pipeline.shapes import TASK_DOF, RobotShape
 from pipeline.sim.robot_crosscheck import crosscheck_robot_file
 from pipeline.spec import Spec
 
 MJCF_SUFFIXES = (".xml", ".mjcf")
-N_JOINTS = 6
 
 
 def _parse(path: Path) -> pin.Model:
@@ -50,11 +50,26 @@ def _parse(path: Path) -> pin.Model:
     if error is not None:
         message = " ".join(str(error).split()) or type(error).__name__
         detail = f"{message}; the parser said: {reason}" if reason else message
-        raise SpecError(f"{path}: not a loadable robot file ({detail[:600]})")
+        second = _mujoco_reason(path)
+        if second:
+            detail += f"; MuJoCo's reading: {second}"
+        raise SpecError(f"{path}: not a loadable robot file ({detail[:900]})")
     if reason:
         print(f"warning: {path}: the robot file's parser said: {reason[:600]}",
               file=sys.stderr)
     return model
+
+
+def _mujoco_reason(path: Path) -> str:
+    """MuJoCo's reason for refusing the file ("" when it reads it): Pinocchio's parsers often
+    fail with a bare C++ message (``unordered_map::at``) where MuJoCo names the element."""
+    import mujoco
+
+    try:
+        mujoco.MjSpec.from_file(str(path))
+    except Exception as exc:  # MuJoCo raises ValueError with its XML error
+        return " ".join(str(exc).split())
+    return ""
 
 
 @contextmanager
@@ -77,15 +92,18 @@ def _stderr_of_c_code() -> Iterator[Callable[[], list[str]]]:
 
 def load_robot_model(path: Path | str, camera_frame: str,
                      bus_inertia_scale: float = 1.0,
-                     package_dirs: tuple[Path, ...] = ()) -> pin.Model:
+                     package_dirs: tuple[Path, ...] = (),
+                     locked_joints: Mapping[str, float] | None = None) -> pin.Model:
     """The Pinocchio model of a robot file, gravity off, validated (eq. 1).
 
-    The parse is cross-checked against MuJoCo's (:func:`crosscheck_robot_file`; meshes are
-    needed only for a body whose inertia comes from them, ``package://`` URIs are looked for in
-    ``package_dirs``) before
-    ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body on the free
-    joint about its own centre of mass (its mass and centre of mass stay): the check is about
-    the file.
+    The file's joints named in ``locked_joints`` are held at the given values (Pinocchio's
+    reduced model: a gripper's jaw, a finger); every other joint must be a revolute joint on
+    the chain from the bus to the camera frame (:func:`arm_joints`). The parse is
+    cross-checked against MuJoCo's (:func:`crosscheck_robot_file`, on the file as written:
+    meshes are needed only for a body whose inertia comes from them, ``package://`` URIs are
+    looked for in ``package_dirs``) before the locks and before ``bus_inertia_scale``
+    multiplies the rotational inertia of the rigid body on the free joint about its own centre
+    of mass (its mass and centre of mass stay): the check is about the file.
     """
     path = Path(path)
     model = _parse(path)
@@ -93,13 +111,11 @@ def load_robot_model(path: Path | str, camera_frame: str,
     if model.njoints < 2 or kinds[0] != "JointModelFreeFlyer":
         raise SpecError(f"{path}: the root joint must be a free joint (the bus); found "
                         f"{kinds[0] if kinds else 'none'}")
-    if model.nq != 7 + N_JOINTS or model.nv != 6 + N_JOINTS:
-        raise SpecError(f"{path}: a {N_JOINTS}-DoF arm needs nq = {7 + N_JOINTS} and nv = "
-                        f"{6 + N_JOINTS}; this model has nq = {model.nq}, nv = {model.nv} "
-                        f"({len(kinds) - 1} arm joints)")
-    if not model.existFrame(camera_frame):
-        raise SpecError(f"{path}: no frame {camera_frame!r} (robot.camera_frame)")
+    camera_frame_id(model, camera_frame, path)
+    reduced = _locked(model, dict(locked_joints or {}), path)
+    arm_joints(reduced, camera_frame, path)
     crosscheck_robot_file(path, model, camera_frame, package_dirs)
+    model = reduced
     model.gravity.setZero()
     if bus_inertia_scale != 1.0:
         bus = model.inertias[1]
@@ -108,11 +124,133 @@ def load_robot_model(path: Path | str, camera_frame: str,
     return model
 
 
+# Pinocchio's one-coordinate revolute joints: about x, y or z of the joint frame, or about an
+# axis the file gives. A URDF "continuous" joint is Pinocchio's unbounded revolute (RUB: two
+# coordinates, cos and sin, for one velocity), refused below by name.
+REVOLUTE_KINDS = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
+
+
+def _lock(names: list[str]) -> str:
+    return f"lock {'them' if len(names) > 1 else 'it'} in robot.locked_joints"
+
+
+# Where a name is several frames (a URDF's fixed joint and its child link may share it), the
+# camera is the body, else an MJCF site, else the joint's frame.
+FRAME_PREFERENCE = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT,
+                    pin.FrameType.JOINT)
+
+
+def camera_frame_id(model: pin.Model, name: str, path: Path | str = "") -> int:
+    """The id of the frame ``name`` (robot.camera_frame): the body of that name, else the
+    site, else the joint frame; a SpecError naming the file when there is none."""
+    ids = {f.type: i for i, f in reversed(list(enumerate(model.frames))) if f.name == name}
+    for kind in FRAME_PREFERENCE:
+        if kind in ids:
+            return ids[kind]
+    if ids:
+        return min(ids.values())
+    raise SpecError(f"{path or 'robot file'}: no frame {name!r} (robot.camera_frame)")
+
+
+def _locked(model: pin.Model, locked: dict[str, float], path: Path) -> pin.Model:
+    """``model`` with the joints named in ``locked`` held at their values (Pinocchio's
+    ``buildReducedModel``); a name the file does not have, a joint of more than one
+    coordinate or a value outside the joint's limits is a SpecError naming the field."""
+    if not locked:
+        return model
+    model = pin.Model(model)  # a copy: the file's model is cross-checked as parsed
+    ids, q = [], pin.neutral(model)
+    for name, value in locked.items():
+        where = f"{path}: field robot.locked_joints.{name}"
+        if not model.existJointName(name) or model.getJointId(name) < 2:
+            raise SpecError(f"{where}: the file has no arm joint {name!r} (its joints: "
+                            f"{', '.join(list(model.names)[2:])})")
+        j = model.getJointId(name)
+        joint = model.joints[j]
+        if joint.nq != 1 or joint.nv != 1:
+            raise SpecError(f"{where}: a {joint.shortname()} joint has {joint.nq} "
+                            f"coordinates; only one-coordinate joints can be locked")
+        lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+        if not lo <= value <= hi:
+            raise SpecError(f"{where}: {value} is outside the joint's limits "
+                            f"[{lo:.6g}, {hi:.6g}]")
+        q[joint.idx_q] = value
+        ids.append(j)
+        # A locked joint becomes a fixed frame of its name; Pinocchio's reduction looks frames
+        # up by name and fails where a body shares it (so100's joint and link "gripper"), so
+        # the joint's own frame is renamed first, in the copy.
+        for i, f in enumerate(model.frames):
+            if f.name == name and f.type == pin.FrameType.JOINT:
+                f.name = f"{name} (locked)"
+                model.frames[i] = f
+        model.names[j] = f"{name} (locked)"
+    return pin.buildReducedModel(model, sorted(ids), q)
+
+
+def arm_joints(model: pin.Model, camera_frame: str, path: Path | str) -> RobotShape:
+    """The arm's shape (its joints, eq. 1), after refusing what is not a task-space arm.
+
+    Every joint after the free one must move the camera: it is on the chain from the bus to
+    the camera frame (a jaw, a finger or a second branch is not; it is refused by name, to be
+    locked), it is revolute with one coordinate (a continuous joint, two coordinates in
+    Pinocchio, and a prismatic or multi-axis joint are refused by name), and there are
+    :data:`~pipeline.shapes.TASK_DOF` of them (fewer cannot place the camera in six degrees
+    of freedom; more, a redundant arm, is not supported yet).
+    """
+    camera_joint = model.frames[camera_frame_id(model, camera_frame, path)].parentJoint
+    chain = set(model.supports[camera_joint])
+    names = list(model.names)
+    off = [names[j] for j in range(2, model.njoints) if j not in chain]
+    if off:
+        raise SpecError(f"{path}: joint{'s' if len(off) > 1 else ''} {', '.join(off)} "
+                        f"{'do' if len(off) > 1 else 'does'} not move the camera frame "
+                        f"{camera_frame!r} (not on the chain from the bus to it: a jaw, a "
+                        f"finger, another branch); {_lock(off)}")
+    kinds = {names[j]: model.joints[j].shortname() for j in range(2, model.njoints)}
+    continuous = [n for n, k in kinds.items() if k.startswith("JointModelRUB")]
+    if continuous:
+        raise SpecError(f"{path}: continuous joint{'s' if len(continuous) > 1 else ''} "
+                        f"{', '.join(continuous)} (two coordinates, cos and sin, in Pinocchio) "
+                        f"{'are' if len(continuous) > 1 else 'is'} not supported: declare "
+                        f"{'them' if len(continuous) > 1 else 'it'} revolute with limits in the "
+                        f"file, or {_lock(continuous)}")
+    other = [f"{n} ({k.removeprefix('JointModel')})" for n, k in kinds.items()
+             if k not in REVOLUTE_KINDS and not k.startswith("JointModelRUB")]
+    if other:
+        raise SpecError(f"{path}: not revolute: {', '.join(other)}; the arm's joints must be "
+                        f"revolute with one coordinate, or {_lock(other)}")
+    shape = RobotShape(tuple(names[2:]))
+    if shape.n < TASK_DOF:
+        raise SpecError(f"{path}: {shape.n} arm joint{'s' if shape.n != 1 else ''} "
+                        f"({', '.join(shape.joints) or 'none'}) to the camera frame "
+                        f"{camera_frame!r}: placing the camera in position and orientation "
+                        f"needs at least {TASK_DOF}")
+    if shape.n > TASK_DOF:
+        raise SpecError(f"{path}: {shape.n} arm joints ({', '.join(shape.joints)}): a "
+                        f"redundant arm (more than {TASK_DOF}) is not supported yet; lock "
+                        f"{shape.n - TASK_DOF} in robot.locked_joints to run it with "
+                        f"{TASK_DOF}")
+    return shape
+
+
+def robot_shape(model: pin.Model) -> RobotShape:
+    """The shape of a loaded model's vectors (eq. 1): its joints after the free one."""
+    return RobotShape(tuple(model.names)[2:])
+
+
 def load_spec_robot(spec: Spec) -> pin.Model:
     """The model of a spec's robot block: :func:`load_robot_model` with its file, camera frame,
-    bus inertia scale and package folders."""
-    return load_robot_model(spec.robot_path, spec.robot.camera_frame,
-                            spec.robot.bus_inertia_scale, spec.package_dirs)
+    bus inertia scale, package folders and locked joints; ``robot.q_bar`` must give one angle
+    per arm joint."""
+    model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
+                             spec.robot.bus_inertia_scale, spec.package_dirs,
+                             spec.robot.locked_joints)
+    shape = robot_shape(model)
+    if len(spec.robot.q_bar) != shape.n:
+        raise SpecError(f"spec {spec.name}: field robot.q_bar: {len(spec.robot.q_bar)} joint "
+                        f"angles for the {shape.n} arm joints of {spec.robot_path.name} "
+                        f"({', '.join(shape.joints)})")
+    return model
 
 
 @dataclass(frozen=True)
@@ -144,6 +282,17 @@ class RobotCard:
     # The file's bodies welded to the free joint, whose masses and inertias the bus body above
     # sums (a fixed arm base adds to the bus: μ_bus is not the user's bus alone).
     bus_links: list[str] = field(default_factory=list)
+    arm_mass: float = 0.0  # kg, every body the arm joints move
+
+    @property
+    def light_bus(self) -> str | None:
+        """A remark when the bus body is not heavier than the arm (None otherwise): a bare
+        arm's base link taken for the bus gives a bus yaw rate (eq. 21) of that link."""
+        if self.bus_mass > self.arm_mass:
+            return None
+        return (f"the bus body ({', '.join(self.bus_links)}, {self.bus_mass:.4g} kg) is not "
+                f"heavier than the arm ({self.arm_mass:.4g} kg): if the file is a bare arm, "
+                f"its base link is taken for the bus; mount the arm on a bus link")
 
 
 def _joint_axis(model: pin.Model, j: int) -> np.ndarray:
@@ -211,4 +360,5 @@ def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
         I_roll=I_roll, D_o=float(D_o), mu_roll=mu_roll,
         dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"),
         bus_links=[f.name for f in model.frames
-                   if f.type == pin.FrameType.BODY and f.parentJoint == 1])
+                   if f.type == pin.FrameType.BODY and f.parentJoint == 1],
+        arm_mass=float(sum(i.mass for i in model.inertias[2:])))

@@ -17,7 +17,7 @@ import pinocchio as pin
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from pipeline.sim.robot_file import load_spec_robot
+from pipeline.sim.robot_file import camera_frame_id, load_spec_robot
 from pipeline.spec import Spec
 
 
@@ -31,7 +31,7 @@ class Robot:
     def __init__(self, spec: Spec):
         self.model = load_spec_robot(spec)
         self.data = self.model.createData()
-        self.fid = self.model.getFrameId(spec.robot.camera_frame)
+        self.fid = camera_frame_id(self.model, spec.robot.camera_frame)
         self.mass = sum(inertia.mass for inertia in self.model.inertias)
 
     def placements(self, q):
