@@ -394,6 +394,10 @@ class VerifiedLog:
         table by path."""
         return {**self.__dict__, "_file": None}
 
+    def column_names(self) -> list[str]:
+        """The table's columns, in the file's order."""
+        return list(self._parquet().schema_arrow.names)
+
     def require(self, columns: list[str]) -> None:
         """A LogError naming the first of ``columns`` the log lacks."""
         _check_columns(self.path, self._parquet(), columns)

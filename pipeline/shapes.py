@@ -20,8 +20,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pipeline.log_layout import BREVE_BLOCK_NAMES
+
 # A task-space arm moves the camera in six degrees of freedom (eq. 3): it needs six joints.
 TASK_DOF = 6
+# The log's columns of a generalised force (the dual of v: bus force, bus torque, joint
+# torques) and of the reduced velocity's blocks (eq. 10).
+GENERALISED_FORCES = ("u_cmd", "u_applied")
+REDUCED_VECTORS = ("v_breve", "v_breve_des")
+# The task error x̃ = [2ε_b; p_e − p_e,des; 2ε_e] (eq. 14): the blocks v̆'s blocks are the
+# rates of.
+TASK_ERROR_BLOCKS = ("bus_attitude", "camera_position", "camera_attitude")
 
 
 def _blocks(*sizes: tuple[str, int]) -> dict[str, slice]:
@@ -60,3 +69,30 @@ class RobotShape:
     def v(self) -> dict[str, slice]:
         """v's blocks: the bus velocity and angular rate (bus frame), the joint rates."""
         return _blocks(("v_b", 3), ("omega_b", 3), ("joints", self.n))
+
+    def labels(self, column: str) -> tuple[str, ...]:
+        """The component labels of a log's vector column ``column``, as a labelled table
+        shows them: ``p_b.x``, ``quat_tb.w``, ``q.<joint>`` for q; ``v_b.x``, ``omega_b.z``,
+        ``qdot.<joint>`` for v; ``<column>.f_b.x``, ``<column>.tau_b.z``, ``<column>.<joint>``
+        for a generalised force (u_cmd, u_applied: the dual of v); ``<column>.<block>.<axis>``
+        for the reduced velocity's blocks (v_breve, v_breve_des, eq. 10) and the task error's
+        (x_tilde, eq. 14), and ``v_c.<axis>`` for the CoM velocity. A KeyError for a column
+        it does not know."""
+        if column == "q":
+            return (*_axes("p_b"), *(f"quat_tb.{c}" for c in "xyzw"),
+                    *(f"q.{j}" for j in self.joints))
+        if column == "v":
+            return (*_axes("v_b"), *_axes("omega_b"), *(f"qdot.{j}" for j in self.joints))
+        if column in GENERALISED_FORCES:
+            return (*_axes(f"{column}.f_b"), *_axes(f"{column}.tau_b"),
+                    *(f"{column}.{j}" for j in self.joints))
+        if column in REDUCED_VECTORS or column == "x_tilde":
+            blocks = BREVE_BLOCK_NAMES if column in REDUCED_VECTORS else TASK_ERROR_BLOCKS
+            return tuple(label for block in blocks for label in _axes(f"{column}.{block}"))
+        if column == "v_c":
+            return _axes("v_c")
+        raise KeyError(f"no labels for a vector column {column!r}")
+
+
+def _axes(prefix: str) -> tuple[str, str, str]:
+    return (f"{prefix}.x", f"{prefix}.y", f"{prefix}.z")
