@@ -23,6 +23,7 @@ loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs
 row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
 step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
 analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics
+redundancy  eq. 37's null-space basis, H, Γ and Γ⁻¹ of a redundant arm     kinematics
 ==========  =============================================================  =================
 
 The order is the priority: the unit with the longest chain of compile time still behind it
@@ -152,7 +153,7 @@ def _linalg() -> None:
                          (la.matmul, (_c(3, 3), _c(3, 3))), (la.solve, (_c(9, 9), _c(9))),
                          (la.inverse, (_c(9, 9),)), (la.cholesky_lower, (_c(9, 9),)),
                          (la.eigvalsh, (_c(9, 9),)), (la.svd, (_c(6, 6),)),
-                         (la.singular_values, (_c(12, 12),))):
+                         (la.singular_values, (_c(12, 12),)), (la.determinant, (_c(6, 6),))):
         _compile(kernel, *args)
 
 
@@ -294,6 +295,18 @@ def _analysis() -> None:
     svd_right(gamma)
 
 
+def _redundancy() -> None:
+    """Eq. 37's kernels for a 7-joint arm (the shapes are not part of a kernel's type: any n
+    uses the same specialisation)."""
+    from pipeline.sim import redundancy as rd
+
+    _compile(rd.null_space_terms, _c(6, 7), _c(6, 3), _c(13, 13), 1.0, 1.0, 1.0)
+    _compile(rd.extended_gamma, _c(3, 3), _c(3), _c(3, 7), _c(6, 3), _c(6, 7), _c(1, 10))
+    ns = rd.NullSpace(Z=_c(7, 1), H=_c(10, 10), Lambda_n=_c(1, 1), Y=_c(1, 10), X_w=_c(7, 3),
+                      X_e=_c(7, 6), s_min_J=1.0, kappa_J=1.0)
+    _compile(rd.extended_gamma_inverse, _c(3, 3), _c(3), _c(3, 7), ns)
+
+
 # In priority order (the module docstring's table): a free process takes the first unit whose
 # prerequisites are done. The order is by the longest chain of compile time from each unit to
 # the end (the classic list-scheduling rule), with the times a cold compile measured here.
@@ -313,6 +326,8 @@ UNITS = {u.name: u for u in (
     Unit("row", "the step's readers, writers and γ ramp (eq. 20)", ("linalg",), _row),
     Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
     Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics",), _analysis),
+    Unit("redundancy", "a redundant arm's null-space terms (eq. 37)", ("kinematics",),
+         _redundancy),
 )}
 
 

@@ -10,7 +10,8 @@ neither reorder a sum nor fuse a multiply-add). Under ``NUMBA_DISABLE_JIT=1`` th
 run in Python on the same floats, with the same results.
 
 - Products sum k = 0, 1, … sequentially from 0.0 (:func:`matmul`, :func:`matvec`, :func:`dot`).
-- :func:`solve` and :func:`inverse`: LU with partial pivoting (the first largest pivot).
+- :func:`solve`, :func:`inverse` and :func:`determinant`: LU with partial pivoting (the
+  first largest pivot).
 - :func:`cholesky_lower`: Cholesky–Banachiewicz, row by row.
 - :func:`eigvalsh`: cyclic Jacobi on a symmetric matrix.
 - :func:`svd`, :func:`singular_values`, :func:`svd_right`: one-sided (Hestenes) Jacobi on the
@@ -81,6 +82,18 @@ def _all_finite(A: np.ndarray) -> bool:
 
 
 @jit
+def _pivot(lu: np.ndarray, k: int) -> tuple[int, float]:
+    """Partial pivoting at column k: the first row i >= k of the largest |lu[i, k]|, and that
+    magnitude."""
+    p = k
+    big = abs(lu[k, k])
+    for i in range(k + 1, lu.shape[0]):
+        if abs(lu[i, k]) > big:
+            p, big = i, abs(lu[i, k])
+    return p, big
+
+
+@jit
 def _lu(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """P A = L U in place of a copy (L unit lower, below the diagonal; U on and above), with
     the row order ``perm``; LinAlgError if A is not finite or a pivot is exactly 0."""
@@ -92,11 +105,7 @@ def _lu(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lu = A.copy()
     perm = np.arange(n)
     for k in range(n):
-        p = k
-        big = abs(lu[k, k])
-        for i in range(k + 1, n):
-            if abs(lu[i, k]) > big:
-                p, big = i, abs(lu[i, k])
+        p, big = _pivot(lu, k)
         if big == 0.0:
             raise np.linalg.LinAlgError("the matrix is singular")
         if p != k:
@@ -150,6 +159,30 @@ def inverse(A: np.ndarray) -> np.ndarray:
         out[:, j] = _lu_substitute(lu, perm, e)
         e[j] = 0.0
     return out
+
+
+@jit
+def determinant(A: np.ndarray) -> float:
+    """det A: the product of the pivots of Gaussian elimination with partial pivoting, signed
+    by the row swaps; exactly 0.0 when a column has no nonzero pivot (a singular minor is a
+    value here, not an error)."""
+    n = A.shape[0]
+    lu = A.copy()
+    det = 1.0
+    for k in range(n):
+        p, big = _pivot(lu, k)
+        if big == 0.0:
+            return 0.0
+        if p != k:
+            for j in range(n):
+                lu[k, j], lu[p, j] = lu[p, j], lu[k, j]
+            det = -det
+        det *= lu[k, k]
+        for i in range(k + 1, n):
+            f = lu[i, k] / lu[k, k]
+            for j in range(k + 1, n):
+                lu[i, j] -= f * lu[k, j]
+    return det
 
 
 @jit

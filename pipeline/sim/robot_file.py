@@ -193,9 +193,10 @@ def arm_joints(model: pin.Model, camera_frame: str, path: Path | str) -> RobotSh
     Every joint after the free one must move the camera: it is on the chain from the bus to
     the camera frame (a jaw, a finger or a second branch is not; it is refused by name, to be
     locked), it is revolute with one coordinate (a continuous joint, two coordinates in
-    Pinocchio, and a prismatic or multi-axis joint are refused by name), and there are
-    :data:`~pipeline.shapes.TASK_DOF` of them (fewer cannot place the camera in six degrees
-    of freedom; more, a redundant arm, is not supported yet).
+    Pinocchio, and a prismatic or multi-axis joint are refused by name), and there are at
+    least :data:`~pipeline.shapes.TASK_DOF` of them (fewer cannot place the camera in six
+    degrees of freedom). More is a redundant arm, whose null-space terms are eq. 37's; the
+    stages' loader (:func:`load_spec_robot`) refuses it until the loop runs it.
     """
     camera_joint = model.frames[camera_frame_id(model, camera_frame, path)].parentJoint
     chain = set(model.supports[camera_joint])
@@ -225,11 +226,6 @@ def arm_joints(model: pin.Model, camera_frame: str, path: Path | str) -> RobotSh
                         f"({', '.join(shape.joints) or 'none'}) to the camera frame "
                         f"{camera_frame!r}: placing the camera in position and orientation "
                         f"needs at least {TASK_DOF}")
-    if shape.n > TASK_DOF:
-        raise SpecError(f"{path}: {shape.n} arm joints ({', '.join(shape.joints)}): a "
-                        f"redundant arm (more than {TASK_DOF}) is not supported yet; lock "
-                        f"{shape.n - TASK_DOF} in robot.locked_joints to run it with "
-                        f"{TASK_DOF}")
     return shape
 
 
@@ -240,12 +236,18 @@ def robot_shape(model: pin.Model) -> RobotShape:
 
 def load_spec_robot(spec: Spec) -> pin.Model:
     """The model of a spec's robot block: :func:`load_robot_model` with its file, camera frame,
-    bus inertia scale, package folders and locked joints; ``robot.q_bar`` must give one angle
-    per arm joint."""
+    bus inertia scale, package folders and locked joints, for the stages: six arm joints (the
+    loop of eqs. 12–16 is theirs), and ``robot.q_bar`` one angle per arm joint."""
     model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
                              spec.robot.bus_inertia_scale, spec.package_dirs,
                              spec.robot.locked_joints)
     shape = robot_shape(model)
+    if shape.n > TASK_DOF:
+        raise SpecError(f"{spec.robot_path}: {shape.n} arm joints ({', '.join(shape.joints)}): "
+                        f"the loop runs {TASK_DOF}-joint arms; a redundant arm's null-space "
+                        f"terms exist (eq. 37) but not its loop yet: lock "
+                        f"{shape.n - TASK_DOF} in robot.locked_joints to run it with "
+                        f"{TASK_DOF}")
     if len(spec.robot.q_bar) != shape.n:
         raise SpecError(f"spec {spec.name}: field robot.q_bar: {len(spec.robot.q_bar)} joint "
                         f"angles for the {shape.n} arm joints of {spec.robot_path.name} "

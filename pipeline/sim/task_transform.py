@@ -101,13 +101,19 @@ def gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus):
     """
     n = J_oplus.shape[1]
     g = np.zeros((6 + n, 6 + n))
+    task_rows_into(g, R_tb, p_bc, J_bar_v, G_wb, J_oplus)
+    return g
+
+
+@jit
+def task_rows_into(g, R_tb, p_bc, J_bar_v, G_wb, J_oplus):
+    """Γ's first twelve rows, [v_c; ω_b; ν_e⊕] (eq. 5), written into g (zeros there)."""
     g[0:3, 0:3] = R_tb
     g[0:3, 3:6] = -matmul(R_tb, skew(p_bc))
     g[0:3, 6:] = matmul(R_tb, J_bar_v)
     g[3, 3] = g[4, 4] = g[5, 5] = 1.0
-    g[6:, 3:6] = G_wb
-    g[6:, 6:] = J_oplus
-    return g
+    g[6:12, 3:6] = G_wb
+    g[6:12, 6:] = J_oplus
 
 
 @jit

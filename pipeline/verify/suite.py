@@ -9,10 +9,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from pipeline.verify import checks_analysis, checks_loop, checks_model, checks_step
+from pipeline.verify import (
+    checks_analysis,
+    checks_loop,
+    checks_model,
+    checks_redundancy,
+    checks_step,
+)
 from pipeline.verify.checks_base import Check, CheckResult, run_check
 
-MODULES = (checks_model, checks_loop, checks_step, checks_analysis)
+MODULES = (checks_model, checks_redundancy, checks_loop, checks_step, checks_analysis)
 
 
 def all_checks() -> Iterator[Check]:
