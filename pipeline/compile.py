@@ -23,7 +23,7 @@ loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs
 row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
 step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
 analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics
-redundancy  eq. 37's null-space basis, H, Γ and Γ⁻¹ of a redundant arm     kinematics
+redundancy  eq. 37's null-space basis, H, Γ, Γ⁻¹ and Γ̇ of a redundant arm  kinematics
 ==========  =============================================================  =================
 
 The order is the priority: the unit with the longest chain of compile time still behind it
@@ -305,6 +305,7 @@ def _redundancy() -> None:
     ns = rd.NullSpace(Z=_c(7, 1), H=_c(10, 10), Lambda_n=_c(1, 1), Y=_c(1, 10), X_w=_c(7, 3),
                       X_e=_c(7, 6), s_min_J=1.0, kappa_J=1.0)
     _compile(rd.extended_gamma_inverse, _c(3, 3), _c(3), _c(3, 7), ns)
+    _compile(rd.extended_gamma_dot, _c(12, 13), _c(6, 7), _c(13, 13), _c(13, 13), 1.0, ns)
 
 
 # In priority order (the module docstring's table): a free process takes the first unit whose

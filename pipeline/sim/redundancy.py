@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pipeline.sim.jit import jit
-from pipeline.sim.linalg import cholesky_lower, determinant, inverse, matmul
+from pipeline.sim.linalg import cholesky_lower, determinant, inverse, matmul, matvec, solve
 from pipeline.sim.rotations import skew
 from pipeline.sim.task_transform import damped_pinv, task_rows_into
 
@@ -149,4 +149,71 @@ def extended_gamma_inverse(R_tb, p_bc, J_bar_v, ns):
     g[6:, 12:] = ns.Z
     g[0:3, 3:] = -matmul(np.ascontiguousarray(J_bar_v), np.ascontiguousarray(g[6:, 3:]))
     g[0:3, 3:6] += skew(p_bc)
+    return g
+
+
+@jit
+def null_space_basis_rate(J, J_dot, Z):
+    """Ż̃ (eq. 37e): the rate of :func:`null_space_basis` along a motion with J̇ = ``J_dot``.
+
+    J z_j = 0 gives J ż_j = −J̇ z_j, so ż_j = −J⁺ J̇ z_j + Z̃ a_j (J⁺ = Jᵀ(JJᵀ)⁻¹, exact) with
+    a_j fixed by what the construction holds for all time: ‖z_j‖ = 1 (z_jᵀ ż_j = 0) and z_j's
+    zeros at the other null columns 6 + i, i ≠ j. For k = 1, a = 0.
+    """
+    m, n = J.shape
+    k = n - m
+    J = np.ascontiguousarray(J)
+    Jt = np.ascontiguousarray(J.T)
+    JJt_inv = inverse(matmul(J, Jt))
+    P = matmul(Jt, JJt_inv)  # J⁺
+    Zd = np.empty((n, k))
+    A = np.empty((k, k))
+    b = np.empty(k)
+    for j in range(k):
+        zj = np.ascontiguousarray(Z[:, j])
+        u = -matvec(P, matvec(np.ascontiguousarray(J_dot), zj))
+        A[0, :] = matvec(np.ascontiguousarray(Z.T), zj)
+        b[0] = 0.0
+        r = 1
+        for i in range(k):
+            if i != j:
+                A[r, :] = Z[m + i, :]
+                b[r] = -u[m + i]
+                r += 1
+        a = solve(A, b)
+        Zd[:, j] = u + matvec(np.ascontiguousarray(Z), a)
+    return Zd
+
+
+@jit
+def extended_gamma_dot(gamma_dot_task, J_oplus, M, C, mass, ns):
+    """Γ̇ of eq. 37c (eq. 37e): eq. 7's twelve rows ``gamma_dot_task`` and the null-space
+    rows [0, Ẏ], with
+
+    Ẏ = Λ_n⁻¹ (Ż̃ᵀ H_r + Z̃ᵀ Ḣ_r − Λ̇_n Y),  H_r = [H_qω, H_qq],
+    Λ̇_n = Ż̃ᵀ H_qq Z̃ + Z̃ᵀ Ḣ_qq Z̃ + Z̃ᵀ H_qq Ż̃,
+    Ḣ = Ṁ_ww − (Ṁ_wb M_bw + M_wb Ṁ_bw)/m,  Ṁ = C + Cᵀ,  J̇⊕ = Γ̇[6:12, 6:].
+    """
+    n = J_oplus.shape[1]
+    M = np.ascontiguousarray(M)
+    M_dot = np.ascontiguousarray(C) + np.ascontiguousarray(C.T)
+    H_dot = (np.ascontiguousarray(M_dot[3:, 3:])
+             - (matmul(np.ascontiguousarray(M_dot[3:, 0:3]), np.ascontiguousarray(M[0:3, 3:]))
+                + matmul(np.ascontiguousarray(M[3:, 0:3]),
+                         np.ascontiguousarray(M_dot[0:3, 3:]))) / mass)
+    J_dot = np.ascontiguousarray(gamma_dot_task[6:12, 6:])
+    Z = ns.Z
+    Zd = null_space_basis_rate(J_oplus, J_dot, Z)
+    Zt, Zdt = np.ascontiguousarray(Z.T), np.ascontiguousarray(Zd.T)
+    H_r = np.ascontiguousarray(ns.H[3:, :])
+    H_qq = np.ascontiguousarray(ns.H[3:, 3:])
+    H_r_dot = np.ascontiguousarray(H_dot[3:, :])
+    H_qq_dot = np.ascontiguousarray(H_dot[3:, 3:])
+    Lambda_dot = (matmul(Zdt, matmul(H_qq, Z)) + matmul(Zt, matmul(H_qq_dot, Z))
+                  + matmul(Zt, matmul(H_qq, Zd)))
+    Y_dot = matmul(inverse(ns.Lambda_n), matmul(Zdt, H_r) + matmul(Zt, H_r_dot)
+                   - matmul(Lambda_dot, ns.Y))
+    g = np.zeros((6 + n, 6 + n))
+    g[0:12, :] = gamma_dot_task
+    g[12:, 3:] = Y_dot
     return g

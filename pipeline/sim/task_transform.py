@@ -155,7 +155,8 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
     p_c_dot = matvec(np.ascontiguousarray(Ag[0:3]), v) / mass
     p_ec_dot = matvec(np.ascontiguousarray(R_te.T), p_c_dot) - matvec(S_we, p_ec) - v_e
     R_tb_dot = matmul(R_tb, S_wb)
-    g = np.zeros((12, 12))
+    # The rows of [v_c; ω_b; ν_e⊕] (square for six joints; eq. 37e adds a redundant arm's).
+    g = np.zeros((12, J_e.shape[1]))
     g[0:3, 0:3] = R_tb_dot
     g[0:3, 3:6] = -matmul(R_tb_dot, skew(p_bc)) - matmul(R_tb, skew(p_bc_dot))
     g[0:3, 6:] = matmul(R_tb_dot, J_bar_v) + matmul(R_tb, J_bar_v_dot)
