@@ -8,9 +8,11 @@ one coordinate. Its configuration and velocity are Pinocchio's free-flyer vector
 
 and the task transform Γ (eq. 5) maps v to v̂ = [v_c (3); ω_b (3); ν_e⊕ (6); ...], whose part
 after the CoM velocity is the reduced velocity v̆ (eq. 10) of 3 + 6 = 9 components for a
-six-joint arm. :class:`RobotShape` holds these sizes and the named blocks of each vector, so
-that code takes a block by its name (``shape.q["joints"]``) and a reader sees which 12 means
-6 + n.
+six-joint arm (9 + k with k = n − 6 null-space velocities for a redundant one, eq. 37).
+:data:`Q`, :data:`V`, :data:`U` and :data:`BREVE` name each vector's blocks, the same for
+every arm (the joints run to the end), so code takes a block by its name
+(``v[:, V.omega_b]``) and a reader sees which slice means what; :class:`RobotShape` holds
+one robot's sizes and its joints' names.
 
 The shape is read from the loaded model (:func:`pipeline.sim.robot_file.robot_shape`), never
 typed: the joints are the model's, in its order, with their names from the robot file.
@@ -19,6 +21,7 @@ typed: the joints are the model's, in its order, with their names from the robot
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from pipeline.log_layout import BREVE_BLOCK_NAMES
 
@@ -33,12 +36,49 @@ REDUCED_VECTORS = ("v_breve", "v_breve_des")
 TASK_ERROR_BLOCKS = ("bus_attitude", "camera_position", "camera_attitude")
 
 
-def _blocks(*sizes: tuple[str, int]) -> dict[str, slice]:
-    out, i = {}, 0
-    for name, n in sizes:
-        out[name] = slice(i, i + n)
-        i += n
-    return out
+class QBlocks(NamedTuple):
+    """q's blocks (eq. 1): the bus position (t frame), its attitude quaternion (x, y, z, w),
+    the arm's joint coordinates."""
+
+    p_b: slice
+    quat_tb: slice
+    joints: slice
+
+
+class VBlocks(NamedTuple):
+    """v's blocks (eq. 1): the bus's linear and angular velocity (bus frame), the joint
+    rates."""
+
+    v_b: slice
+    omega_b: slice
+    joints: slice
+
+
+class UBlocks(NamedTuple):
+    """A generalised force's blocks (v's dual: u_cmd, u_applied, eq. 29): the force and the
+    torque on the bus (bus frame), the joint torques."""
+
+    f_b: slice
+    tau_b: slice
+    joints: slice
+
+
+class BreveBlocks(NamedTuple):
+    """The reduced velocity v̆'s blocks (eq. 10): ω_b, the camera's linear and angular
+    velocity about the CoM (ν_e⊕), and a redundant arm's null-space velocities (eq. 37)."""
+
+    omega_b: slice
+    nu_e_lin: slice
+    nu_e_ang: slice
+    null_space: slice
+
+
+# The same for every arm: the joints' and the null-space blocks run to the vector's end.
+Q = QBlocks(p_b=slice(0, 3), quat_tb=slice(3, 7), joints=slice(7, None))
+V = VBlocks(v_b=slice(0, 3), omega_b=slice(3, 6), joints=slice(6, None))
+U = UBlocks(f_b=slice(0, 3), tau_b=slice(3, 6), joints=slice(6, None))
+BREVE = BreveBlocks(omega_b=slice(0, 3), nu_e_lin=slice(3, 6), nu_e_ang=slice(6, 9),
+                    null_space=slice(9, None))
 
 
 @dataclass(frozen=True)
@@ -59,16 +99,6 @@ class RobotShape:
     @property
     def nv(self) -> int:
         return 6 + self.n
-
-    @property
-    def q(self) -> dict[str, slice]:
-        """q's blocks: the bus position, its attitude quaternion (x, y, z, w), the joints."""
-        return _blocks(("p_b", 3), ("quat_tb", 4), ("joints", self.n))
-
-    @property
-    def v(self) -> dict[str, slice]:
-        """v's blocks: the bus velocity and angular rate (bus frame), the joint rates."""
-        return _blocks(("v_b", 3), ("omega_b", 3), ("joints", self.n))
 
     def labels(self, column: str) -> tuple[str, ...]:
         """The component labels of a log's vector column ``column``, as a labelled table

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
+from pipeline.shapes import Q
 from pipeline.sim.margins import dominant_root, gain_margin, loop_gain, root_regime
 from pipeline.sim.robot_file import RobotCard
 from pipeline.sim.stability import DampingMode, ModeFixes
@@ -55,7 +56,7 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
     import pinocchio as pin
 
     q = pin.neutral(model)
-    q[7:] = spec.robot.q_bar
+    q[Q.joints] = spec.robot.q_bar
     budget = budget or Budget.from_environment()
     est = check_mission(spec, budget, str(spec_arg))
     from pipeline.sim.mission import Mission

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.shapes import Q, U, V
+
 BUS_TORQUE_AXES = ("x_b", "y_b", "z_b")
 
 
@@ -59,9 +61,9 @@ class AttitudeHarm:
 class Harm:
     """The harm record of one run (eqs. 30–32), units in the field names' comments."""
 
-    bus_torque: ChannelHarm  # N·m, the plant's received τ_b (u_applied[3:6])
-    joint_torque: ChannelHarm  # N·m, the plant's received joint torques (u_applied[6:])
-    joint_rate: ChannelHarm  # rad/s, q̇ (v[6:])
+    bus_torque: ChannelHarm  # N·m, the plant's received τ_b (u_applied's U.tau_b)
+    joint_torque: ChannelHarm  # N·m, the plant's received joint torques (U.joints)
+    joint_rate: ChannelHarm  # rad/s, q̇ (v's V.joints)
     attitude: AttitudeHarm
 
 
@@ -111,13 +113,13 @@ def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.
     ``v``, ``q`` and ``attitude_excursion_deg``, N ≥ 3."""
     n_joints = u_applied.shape[1] - 6
     joints = tuple(f"joint {j + 1}" for j in range(n_joints))
-    at_instants = np.degrees(attitude_jitter(q[:, 3:7]))  # instants 1 … N−2
+    at_instants = np.degrees(attitude_jitter(q[:, Q.quat_tb]))  # instants 1 … N−2
     between = np.asarray(excursion_deg, dtype=float)
     jitter = at_instants + between[1:-1]
-    steps = np.degrees(np.linalg.norm(attitude_steps(q[:, 3:7]), axis=1))
-    return Harm(bus_torque=channel_harm(u_applied[:, 3:6], dt, BUS_TORQUE_AXES),
-                joint_torque=channel_harm(u_applied[:, 6:], dt, joints),
-                joint_rate=channel_harm(v[:, 6:], dt, joints),
+    steps = np.degrees(np.linalg.norm(attitude_steps(q[:, Q.quat_tb]), axis=1))
+    return Harm(bus_torque=channel_harm(u_applied[:, U.tau_b], dt, BUS_TORQUE_AXES),
+                joint_torque=channel_harm(u_applied[:, U.joints], dt, joints),
+                joint_rate=channel_harm(v[:, V.joints], dt, joints),
                 attitude=AttitudeHarm(jitter_deg=_rms(jitter), jitter_deg_max=float(jitter.max()),
                                       at_instants_deg=_rms(at_instants),
                                       between_instants_deg=_rms(between),

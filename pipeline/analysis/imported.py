@@ -32,6 +32,7 @@ from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import SpecError
 from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, VerifiedLog
 from pipeline.provenance.keys import analysis_version, file_digest
+from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import mode_fixes
@@ -104,7 +105,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         window=rs.Window(start_step=win.start, stop_step=win.stop, rule=win.rule),
         provenance=prov if own_sigma else None, directions=directions, dominant=dominant,
         velocity_jump=rs.VelocityJump(median=float(np.median(jumps)), max=float(np.max(jumps))),
-        bus_rate=bus_rate_data(cols["v"][:, 3:6]),
+        bus_rate=bus_rate_data(cols["v"][:, V.omega_b]),
         conditioning=conditioning_along(log, robot.floor),
         damping=damping, prediction=prediction,
         versions=log.meta.versions or {},

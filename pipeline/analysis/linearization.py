@@ -16,6 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.analysis.theory import flown_map, posture_stiffness
+from pipeline.shapes import Q
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import Reference
 from pipeline.sim.mission import LoopState, Mission, task_errors
@@ -86,7 +87,7 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     mission = Mission(spec)
     q0 = mission.q0.copy()
     mission.guidance = StaticGuidance(_rest_reference(mission, q0))
-    mission.robot.q_bar = q0[7:].copy()  # the posture spring is at rest too
+    mission.robot.q_bar = q0[Q.joints].copy()  # the posture spring is at rest too
     model = mission.robot.model
     plant = spec.mission.plant
     delay = plant.delay_steps if plant.model == "sampled" else 0

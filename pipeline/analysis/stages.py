@@ -25,6 +25,7 @@ from pipeline.errors import CheckFailed, LogError, SpecError
 from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
+from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.margins import period_steps, requirement_fixes, root_regime
@@ -148,7 +149,8 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
                                data_direction=data_dir.tolist()),
         velocity_jump=rs.VelocityJump(median=float(np.median(jumps)),
                                       max=float(np.max(jumps))),
-        bus_rate=bus_rate_statistics(cols["v"][:, 3:6], dt, spec.controller.limits.omega_b_acc),
+        bus_rate=bus_rate_statistics(cols["v"][:, V.omega_b], dt,
+                                     spec.controller.limits.omega_b_acc),
         metrics=mission_metrics(cols),
         harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
         camera_roll=roll_smear(nu_breve[:, 8], dt, spec.camera.resolution_px,

@@ -46,6 +46,7 @@ import pinocchio as pin
 
 from pipeline.importer.conventions import Conventions, Converted, to_project
 from pipeline.importer.timebase import GAP_STEPS
+from pipeline.shapes import V
 
 # pin.difference(q, pin.integrate(q, ξ)) − ξ, measured over 4 800 random configurations
 # (positions 0.1 to 100 m) and twists of 1e-4 to 0.1 per step (2026-12-03, Pinocchio 4.1): at
@@ -54,8 +55,8 @@ from pipeline.importer.timebase import GAP_STEPS
 ROUNDING_ULPS = 1024
 
 
-BLOCKS = (("the bus's linear velocity", slice(0, 3)), ("the bus's angular velocity", slice(3, 6)),
-          ("the joint rates", slice(6, None)))
+BLOCKS = (("the bus's linear velocity", V.v_b), ("the bus's angular velocity", V.omega_b),
+          ("the joint rates", V.joints))
 
 
 @dataclass(frozen=True)
@@ -152,7 +153,8 @@ def chord_distance(d: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def bus_bracket(xi_a: np.ndarray, xi_b: np.ndarray) -> np.ndarray:
     """[ξ_a, ξ_b] of bus twists ξ = (v, ω) in se(3), rows."""
-    v_a, w_a, v_b, w_b = xi_a[:, :3], xi_a[:, 3:6], xi_b[:, :3], xi_b[:, 3:6]
+    v_a, w_a = xi_a[:, V.v_b], xi_a[:, V.omega_b]
+    v_b, w_b = xi_b[:, V.v_b], xi_b[:, V.omega_b]
     return np.hstack([np.cross(w_a, v_b) - np.cross(w_b, v_a), np.cross(w_a, w_b)])
 
 

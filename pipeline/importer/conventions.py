@@ -21,6 +21,7 @@ from typing import Literal
 import numpy as np
 
 from pipeline.errors import SpecError
+from pipeline.shapes import Q, V
 
 QuatOrder = Literal["xyzw", "wxyz"]
 VelocityFrame = Literal["bus", "world"]
@@ -80,14 +81,15 @@ def to_project(q_raw: np.ndarray, v_raw: np.ndarray, conv: Conventions,
     q = np.array(q_raw, dtype=float, copy=True)
     v = np.array(v_raw, dtype=float, copy=True)
     if conv.length_unit == "mm":
-        q[:, 0:3] *= 1e-3
-        v[:, 0:3] *= 1e-3
+        q[:, Q.p_b] *= 1e-3
+        v[:, V.v_b] *= 1e-3
     if conv.angle_unit == "deg":
-        q[:, 7:] = np.deg2rad(q[:, 7:])
-        v[:, 3:] = np.deg2rad(v[:, 3:])
+        q[:, Q.joints] = np.deg2rad(q[:, Q.joints])
+        rates = slice(V.omega_b.start, None)  # every angular rate: ω_b and the joints'
+        v[:, rates] = np.deg2rad(v[:, rates])
     if conv.quaternion == "wxyz":
-        q[:, 3:7] = q[:, [4, 5, 6, 3]]
-    norm = np.linalg.norm(q[:, 3:7], axis=1)
+        q[:, Q.quat_tb] = q[:, Q.quat_tb][:, [1, 2, 3, 0]]  # (w, x, y, z) → (x, y, z, w)
+    norm = np.linalg.norm(q[:, Q.quat_tb], axis=1)
     err = float(np.max(np.abs(norm - 1.0))) if len(norm) else 0.0
     if not err <= UNIT_QUAT_TOL:
         k = int(np.argmax(np.abs(norm - 1.0)))
@@ -104,9 +106,9 @@ def to_project(q_raw: np.ndarray, v_raw: np.ndarray, conv: Conventions,
         # and should not wait for SciPy's spatial package (a refusal there is quick).
         from scipy.spatial.transform import Rotation
 
-        R_bt = Rotation.from_quat(q[:, 3:7]).inv()  # world axes → bus axes
-        v[:, 0:3] = R_bt.apply(v[:, 0:3])
-        v[:, 3:6] = R_bt.apply(v[:, 3:6])
+        R_bt = Rotation.from_quat(q[:, Q.quat_tb]).inv()  # world axes → bus axes
+        v[:, V.v_b] = R_bt.apply(v[:, V.v_b])
+        v[:, V.omega_b] = R_bt.apply(v[:, V.omega_b])
     if conv.linear_velocity == "bus_com":
-        v[:, 0:3] -= np.cross(v[:, 3:6], bus_com)
+        v[:, V.v_b] -= np.cross(v[:, V.omega_b], bus_com)
     return Converted(q, v, err)

@@ -23,6 +23,7 @@ from pipeline.analysis.schema import AnalysisRecord
 from pipeline.atomic_files import atomic_write_bytes
 from pipeline.errors import LogError
 from pipeline.logs import VerifiedLog
+from pipeline.shapes import BREVE
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.stability import REDUCED_SYMBOLS
 
@@ -188,7 +189,7 @@ def rates(runs: list[RunData], path: Path, styles: dict[str, RunStyle] | None = 
     ringing = [i for i, r in enumerate(runs) if _rings(r)] or list(range(n))
     for j, i in enumerate(ringing):
         r, c = runs[i], cols[i]
-        w = np.linalg.norm(c["v_breve"][:, 0:3], axis=1)
+        w = np.linalg.norm(c["v_breve"][:, BREVE.omega_b], axis=1)
         top.semilogy(c["t"], np.where(w > 0, w, np.nan), label=label(r.name),
                      **_line_kw(styles[r.name], j, len(ringing), len(w)))
     top.set(title="bus angular rate ‖ω_b‖ (log scale) of the runs in which a mode rings",
@@ -216,7 +217,7 @@ def divergence_growth(run: RunData, path: Path) -> None:
     growth (eqs. 22, 23)."""
     g = run.record.divergence
     c = _cols(run, ["v_breve"])
-    x = c["v_breve"][:, 0:3] @ np.array(g.direction)
+    x = c["v_breve"][:, BREVE.omega_b] @ np.array(g.direction)
     d = np.abs(np.diff(x))
     k = np.arange(d.size)
     fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")

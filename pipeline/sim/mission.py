@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from pipeline.log_layout import LIMIT_FLAGS, ROW_SIZE, SCALAR_COLUMNS, VECTOR_COLUMNS
 from pipeline.logs import ROW_GROUP, concat_columns
+from pipeline.shapes import Q
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
 from pipeline.sim.breve_controller import damping_rates
@@ -124,7 +125,7 @@ class Mission:
         ref0 = self.guidance.reference(0.0)
         q0 = q_start.copy()
         q0[0:3] = ref0.p_c - matvec(ref0.R_b, T0.p_bc)
-        q0[3:7] = quat_from_matrix(ref0.R_b)
+        q0[Q.quat_tb] = quat_from_matrix(ref0.R_b)
         self.q0 = q0
         # The CoM starts on the orbit at the orbit's speed (the bus was inserted into it),
         # with the arm and bus at rest relative to it.

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from pipeline.shapes import Q
 from pipeline.sim import task_transform as tt
 from pipeline.sim.robot_file import RobotCard, camera_frame_id, load_spec_robot, robot_card
 from pipeline.sim.sampling import Sampling, sigma_min_and_cond
@@ -109,7 +110,7 @@ class GiordanoRobot:
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:
         """Bus at the origin with identity attitude, arm at ``q_joint``."""
         q = pin.neutral(self.model)
-        q[7:] = q_joint
+        q[Q.joints] = q_joint
         return q
 
     def gamma_of_joints(self, q_joint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -62,6 +62,7 @@ import pinocchio as pin
 
 from pipeline.errors import OutputError, SpecError
 from pipeline.paths import PACKAGE_DIR, source_checkout, user_cache_dir
+from pipeline.shapes import Q
 
 ULPS = 256
 EPS = float(np.finfo(float).eps)
@@ -313,7 +314,7 @@ def configurations(model: pin.Model, n_random: int = N_RANDOM, seed: int = SEED
         q = pin.neutral(model)
         q[0:3] = rng.uniform(-BUS_RANGE, BUS_RANGE, 3)
         quat = rng.standard_normal(4)
-        q[3:7] = quat / np.linalg.norm(quat)
+        q[Q.quat_tb] = quat / np.linalg.norm(quat)
         for i in range(2, model.njoints):
             jm = model.joints[i]
             if jm.nq == 1:
