@@ -74,10 +74,31 @@ def test_fingers_refused_by_name_then_locked():
     assert robot_shape(load(PANDA, "panda_hand", **FINGERS)).n == 7
 
 
-def test_continuous_joints_refused_by_name():
+def test_continuous_joints_refused_by_name_and_lockable():
     msg = _refusal(KINOVA, "j2s6s200_end_effector")
     assert ("continuous joints j2s6s200_joint_1, j2s6s200_joint_4, j2s6s200_joint_6"
             in msg), msg
+    # Locked as the refusal advises, the continuous joints are held at their angles (cos and
+    # sin in Pinocchio): the camera placement is the full model's at those angles.
+    angles = {"j2s6s200_joint_1": 0.3, "j2s6s200_joint_4": -1.2, "j2s6s200_joint_6": 2.5}
+    full = pin.buildModelFromUrdf(str(KINOVA), pin.JointModelFreeFlyer())
+    reduced = pin.buildReducedModel(full, [full.getJointId(n) for n in angles], pin.neutral(full))
+    assert "3 arm joints" in _refusal(KINOVA, "j2s6s200_end_effector", **angles)
+    from pipeline.sim.robot_file import _locked
+
+    model = _locked(full, angles, KINOVA)
+    assert model.nq == reduced.nq == 10
+    q_f = pin.neutral(full)
+    for name, a in angles.items():
+        i = full.joints[full.getJointId(name)].idx_q
+        q_f[i:i + 2] = np.cos(a), np.sin(a)
+    data_r, data_f = model.createData(), full.createData()
+    pin.framesForwardKinematics(model, data_r, pin.neutral(model))
+    pin.framesForwardKinematics(full, data_f, q_f)
+    fid = "j2s6s200_end_effector"
+    np.testing.assert_allclose(data_r.oMf[model.getFrameId(fid, pin.FrameType.BODY)].homogeneous,
+                               data_f.oMf[full.getFrameId(fid, pin.FrameType.BODY)].homogeneous,
+                               rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize(("locked", "needle"), [

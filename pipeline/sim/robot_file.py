@@ -12,6 +12,7 @@ robot in the file.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import tempfile
@@ -154,8 +155,9 @@ def camera_frame_id(model: pin.Model, name: str, path: Path | str = "") -> int:
 
 def _locked(model: pin.Model, locked: dict[str, float], path: Path) -> pin.Model:
     """``model`` with the joints named in ``locked`` held at their values (Pinocchio's
-    ``buildReducedModel``); a name the file does not have, a joint of more than one
-    coordinate or a value outside the joint's limits is a SpecError naming the field."""
+    ``buildReducedModel``; a continuous joint's angle as its cos and sin); a name the file does
+    not have, a joint of several degrees of freedom or a value outside the joint's limits is a
+    SpecError naming the field."""
     if not locked:
         return model
     model = pin.Model(model)  # a copy: the file's model is cross-checked as parsed
@@ -167,14 +169,20 @@ def _locked(model: pin.Model, locked: dict[str, float], path: Path) -> pin.Model
                             f"{', '.join(list(model.names)[2:])})")
         j = model.getJointId(name)
         joint = model.joints[j]
-        if joint.nq != 1 or joint.nv != 1:
+        if joint.shortname().startswith("JointModelRUB"):
+            # A continuous joint: its angle is held as Pinocchio's (cos, sin), unbounded.
+            q[joint.idx_q:joint.idx_q + 2] = math.cos(value), math.sin(value)
+        elif joint.nq != 1 or joint.nv != 1:
             raise SpecError(f"{where}: a {joint.shortname()} joint has {joint.nq} "
-                            f"coordinates; only one-coordinate joints can be locked")
-        lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
-        if not lo <= value <= hi:
-            raise SpecError(f"{where}: {value} is outside the joint's limits "
-                            f"[{lo:.6g}, {hi:.6g}]")
-        q[joint.idx_q] = value
+                            f"coordinates; only one-coordinate and continuous joints can be "
+                            f"locked")
+        else:
+            lo = model.lowerPositionLimit[joint.idx_q]
+            hi = model.upperPositionLimit[joint.idx_q]
+            if not lo <= value <= hi:
+                raise SpecError(f"{where}: {value} is outside the joint's limits "
+                                f"[{lo:.6g}, {hi:.6g}]")
+            q[joint.idx_q] = value
         ids.append(j)
         # A locked joint becomes a fixed frame of its name; Pinocchio's reduction looks frames
         # up by name and fails where a body shares it (so100's joint and link "gripper"), so
