@@ -22,6 +22,7 @@ from pipeline.sim.robot_file import camera_frame_id, load_robot_model, load_spec
 from pipeline.sim.task_transform import gamma_inverse, gamma_matrix, kinematic_terms
 from pipeline.spec import load_spec, with_overrides
 from pipeline.verify.checks_base import draw_state
+from pipeline.verify.checks_redundancy import transform_terms
 
 COLLECTION = Path(metadata.distribution("example-robot-data").locate_file(
     "cmeel.prefix/share/example-robot-data/robots"))
@@ -87,16 +88,7 @@ def test_the_collections_xarm7_self_motion():
     g = np.random.default_rng(7)
     q = np.r_[g.uniform(-1, 1, 3), [0, 0, 0, 1.0],
               g.uniform(model.lowerPositionLimit[7:] / 2, model.upperPositionLimit[7:] / 2)]
-    pin.computeJointJacobians(model, data, q)
-    pin.updateFramePlacements(model, data)
-    J_e = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL).copy()
-    M = pin.crba(model, data, q).copy()
-    M = np.triu(M) + np.triu(M, 1).T
-    mass = float(pin.computeTotalMass(model))
-    R_tb, p_b = data.oMi[1].rotation.copy(), data.oMi[1].translation.copy()
-    R_te, p_e = data.oMf[fid].rotation.copy(), data.oMf[fid].translation.copy()
-    p_bc, _, _, _, J_bar_v, J_oplus, G_wb = kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass)
-    ns = rd.null_space_terms(J_oplus, G_wb, M, mass, 0.02, 0.02)
+    (R_tb, p_bc, _, _, _, J_bar_v, J_oplus, _), ns, _ = transform_terms(model, fid, q)
     z = scipy.linalg.null_space(J_oplus)[:, 0]
     assert abs(abs(ns.Z[:, 0] @ z) - 1.0) < 1e-12
     v = rd.extended_gamma_inverse(R_tb, p_bc, J_bar_v, ns) @ np.r_[np.zeros(12), 0.5]

@@ -41,11 +41,19 @@ def _state(salt: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _terms(q: np.ndarray):
-    """(kinematic terms of eqs. 2–4, null-space terms, M) at q, through the code under test."""
+    """:func:`transform_terms` of the checks' robot at q."""
+    model, fid, _ = _model()
+    return transform_terms(model, fid, q)
+
+
+def transform_terms(model: pin.Model, fid: int, q: np.ndarray):
+    """((R_tb, kinematic terms of eqs. 2–4), null-space terms of eq. 37, M) of a redundant
+    ``model`` at q, camera frame ``fid``, through the code under test (Pinocchio's inputs
+    copied, M symmetric)."""
     from pipeline.sim.redundancy import null_space_terms
     from pipeline.sim.task_transform import kinematic_terms
 
-    model, fid, mass = _model()
+    mass = float(pin.computeTotalMass(model))
     data = model.createData()
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
