@@ -23,7 +23,8 @@ import os
 from dataclasses import dataclass
 
 from pipeline.errors import SpecError
-from pipeline.log_layout import ROW_SIZE
+from pipeline.log_layout import row_size
+from pipeline.shapes import TASK_DOF, RobotShape
 
 STEP_SECONDS = 1.5e-4  # s per step without the target (bench: ~8e-5), with margin
 POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
@@ -32,7 +33,10 @@ POINT_SECONDS = 1e-8  # s per target point and step (bench: ~5e-9), with margin
 # between the instants; 1.87 ms a step of 8 substeps in all), with margin.
 SUBSTEP_SECONDS = 3e-4
 HOLD_SECONDS = 5e-4
-ROW_FLOATS = ROW_SIZE  # the log row's width (pipeline/log_layout.py)
+# The log row's width (pipeline/log_layout.py) for a six-joint arm: the budget is judged from
+# the spec alone, before the robot file is read; each joint beyond six adds six floats and a
+# redundant arm two limit flags (a seven-joint row is 8 % wider).
+ROW_FLOATS = row_size(RobotShape(tuple(f"joint{i}" for i in range(TASK_DOF))))
 ROW_BYTES = 3 * 8 * ROW_FLOATS
 POINT_BYTES = 7 * 8
 MAX_SWEEP_POINTS = 10_000

@@ -15,15 +15,17 @@ rotations   ``skew``, the leaf most kernels call                           linal
 updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       linalg
 rhs         eq. 13's right-hand side and its named terms                   linalg
 kinematics  eqs. 2–6's pieces: kinematic terms, damped inverse, Γ, Γ⁻¹     rotations
+redundancy  eq. 37's null-space basis, H, Γ, Γ⁻¹ and Γ̇ of a redundant arm  kinematics
 rates       Γ̇ (eq. 7), M̂ and Ĉ (eqs. 8, 9) and σ_min, κ (eq. 19)          rotations
 errors      the task errors of eq. 14 and the CoM loop of eq. 12           rotations
 guidance    the references of eq. 17 and the coverage test of eq. 18       linalg
-transform   ``task_transform`` and ``full_transform`` (eqs. 2–9, 19)      kinematics, rates
+transform   ``task_transform`` and ``full_transform`` (eqs. 2–9, 19, 37)  kinematics, rates,
+                                                                           redundancy
 loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs, updates, errors
 row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
 step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
-analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics
-redundancy  eq. 37's null-space basis, H, Γ, Γ⁻¹ and Γ̇ of a redundant arm  kinematics
+analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics,
+                                                                           redundancy
 ==========  =============================================================  =================
 
 The order is the priority: the unit with the longest chain of compile time still behind it
@@ -52,7 +54,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import RunFailed
-from pipeline.log_layout import ROW_SIZE
 from pipeline.orphans import exit_with_parent
 from pipeline.paths import display_path
 from pipeline.progress import interactive, say, stage
@@ -121,6 +122,14 @@ def _reference():
     return Reference(**{f: _c(3, 3) if size == 9 else _c(size) for f, size in REFERENCE_FIELDS})
 
 
+def _layout():
+    """The step's layouts of the seed spec's six-joint robot (the places' types are the same
+    for every arm)."""
+    from pipeline.sim.control_step import step_layout
+
+    return step_layout(seed().robot.shape)
+
+
 def _task_errors():
     from pipeline.sim.control_step import TaskErrors
 
@@ -141,7 +150,7 @@ def _step_state():
     from pipeline.sim import control_step as cs
 
     return cs.StepState(**{f: (False if f == "has_prev" else 0.0 if size == 1 else _c(size))
-                           for f, size in cs.STATE_FIELDS if f != "dq"})
+                           for f, size in _layout().state_fields if f != "dq"})
 
 
 def _linalg() -> None:
@@ -168,7 +177,7 @@ def _rhs() -> None:
 
     # C̆_c is a view of Ĉ (tr.C_hat[3:, :3]): not contiguous, Numba's layout "A".
     _compile(breve_rhs, _c(9, 9), _c(9, 9), _c(12, 12)[3:, :3], _c(12, 12), _c(9), _c(9),
-             _task_errors(), _c(9, 9), _c(9, 9), 1.0, _c(6), _c(6))
+             _task_errors(), _c(9, 9), _c(9, 9), 1.0, _c(6), _c(6), 1.0)
 
 
 def _updates() -> None:
@@ -183,7 +192,7 @@ def _errors() -> None:
     from pipeline.sim.com_controller import com_update
     from pipeline.sim.control_step import task_error_terms
 
-    _compile(task_error_terms, _c(3, 3), _c(3, 3), _c(3), _c(3), _reference(), 1.0, _c(3))
+    _compile(task_error_terms, _c(3, 3), _c(3, 3), _c(3), _c(3), _reference(), 1.0, _c(3), 9)
     _compile(com_update, *(_c(3) for _ in range(5)), *(1.0 for _ in range(7)))
 
 
@@ -200,7 +209,7 @@ def _loop() -> None:
                           dAg=_fortran(6, 12))
     p = cs.ControlParams(**{f: (False if f in ("derate_gain", "imex") else
                                 1.0 if size == 1 else _c(size))
-                            for f, size in cs.CONTROLLER_FIELDS})
+                            for f, size in _layout().controller_fields})
     _compile(cs.loop_update, pose, _transform_bundle(), _reference(), p,
              _step_state(), 1.0, _c(9, 9), _c(9, 9))
 
@@ -261,11 +270,12 @@ def _row() -> None:
                         v_breve_des=_c(9), mu_max=1.0, hit_acc=flags, hit_rate=flags,
                         sat_v_c_acc=False, sat_v_c_rate=False, sat_v_max=False,
                         com_pos_err=_c(3))
-    _compile(cs.read_params, _c(cs.CONTROLLER_SIZE))
-    _compile(cs.read_state, _c(cs.STATE_SIZE))
+    layout = _layout()
+    _compile(cs.read_params, _c(1), layout.places.controller)
+    _compile(cs.read_state, _c(1), layout.places.state)
     _compile(read_reference, _c(1))
-    _compile(cs.write_row, _c(ROW_SIZE), _step_state(), _transform_bundle(), 1.0, 1.0, out,
-             _c(12), 1.0, 1.0, 1.0)
+    _compile(cs.write_row, _c(layout.row_size), layout.places.row, _step_state(),
+             _transform_bundle(), 1.0, 1.0, out, _c(12), 1.0, 1.0, 1.0)
     _compile(commanded_force, *(_c(12, 12) for _ in range(4)), _c(12), _c(12), _c(12), 1.0)
     _compile(cs.pointing_errors, _c(3, 3), _c(3), _c(3, 3), _c(3), _c(3))
     _compile(cs.state_is_finite, _c(13), _c(12), _c(9), _c(3))
@@ -300,8 +310,9 @@ def _redundancy() -> None:
     uses the same specialisation)."""
     from pipeline.sim import redundancy as rd
 
+    _compile(rd.null_space_map, _c(6, 7), _c(13, 13), 1.0)
     _compile(rd.null_space_terms, _c(6, 7), _c(6, 3), _c(13, 13), 1.0, 1.0, 1.0)
-    _compile(rd.extended_gamma, _c(3, 3), _c(3), _c(3, 7), _c(6, 3), _c(6, 7), _c(1, 10))
+    _compile(rd.extended_gamma, _c(13, 13), _c(1, 10))
     ns = rd.NullSpace(Z=_c(7, 1), H=_c(10, 10), Lambda_n=_c(1, 1), Y=_c(1, 10), X_w=_c(7, 3),
                       X_e=_c(7, 6), s_min_J=1.0, kappa_J=1.0)
     _compile(rd.extended_gamma_inverse, _c(3, 3), _c(3), _c(3, 7), ns)
@@ -317,18 +328,19 @@ UNITS = {u.name: u for u in (
     Unit("updates", "the integrators and damping rates (eqs. 15, 21)", ("linalg",), _updates),
     Unit("rhs", "eq. 13's right-hand side", ("linalg",), _rhs),
     Unit("kinematics", "the pieces of eqs. 2-6", ("rotations",), _kinematics),
+    Unit("redundancy", "a redundant arm's null-space terms (eq. 37)", ("kinematics",),
+         _redundancy),
     Unit("rates", "Γ̇, M̂, Ĉ and Γ's conditioning (eqs. 7-9, 19)", ("rotations",), _rates),
     Unit("errors", "the task errors and CoM loop (eqs. 12, 14)", ("rotations",), _errors),
     Unit("guidance", "the references and coverage (eqs. 17, 18)", ("linalg",), _guidance),
-    Unit("transform", "the task transform (eqs. 2-9, 19)", ("kinematics", "rates"),
-         _transform),
+    Unit("transform", "the task transform (eqs. 2-9, 19, 37)",
+         ("kinematics", "rates", "redundancy"), _transform),
     Unit("loop", "the loops of one step (eqs. 12-16, 21)", ("rhs", "updates", "errors"),
          _loop),
     Unit("row", "the step's readers, writers and γ ramp (eq. 20)", ("linalg",), _row),
     Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
-    Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics",), _analysis),
-    Unit("redundancy", "a redundant arm's null-space terms (eq. 37)", ("kinematics",),
-         _redundancy),
+    Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics", "redundancy"),
+         _analysis),
 )}
 
 

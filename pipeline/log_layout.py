@@ -1,30 +1,55 @@
 """The log row's layout, defined once (architecture §6): the fields the compiled step writes,
-in order, with their widths. The kernel's row (:mod:`pipeline.sim.control_step`), the log's
-columns (:mod:`pipeline.logs`) and the row's size in the budget (:mod:`pipeline.budget`) are
-all read from here; the kernels freeze it as constants, so it is part of their cache key
-(:func:`pipeline.sim.jit.source_stamp`).
+in order, with their widths, sized by the robot's shape (:class:`pipeline.shapes.RobotShape`).
+The kernel's row (:mod:`pipeline.sim.control_step`), the log's columns (:mod:`pipeline.logs`)
+and the row's size in the budget (:mod:`pipeline.budget`) are all read from here; the kernels
+read each field's place from the layout of the robot that runs (the places are an argument,
+the same Numba type for every arm).
 """
 
 from __future__ import annotations
 
-# The blocks of the reduced velocity v̆ = [ω_b; ν_e,lin; ν_e,ang], three components each, and
-# the limit flags: each block's acceleration and rate bound (eq. 16), the CoM loop's two and
-# the v_max clip.
-BREVE_BLOCK_NAMES = ("omega_b", "nu_e_lin", "nu_e_ang")
+import functools
+
+from pipeline.shapes import BREVE_BLOCK_NAMES, NULL_SPACE_BLOCK, TASK_ERROR_SIZE, RobotShape
+
+# The limit flags every log has: each task block's acceleration and rate bound (eq. 16), the
+# CoM loop's two and the v_max clip. A redundant arm's null-space block adds its two
+# (:func:`limit_flags`).
 LIMIT_FLAGS = tuple(
     [f"sat_{name}_{kind}" for name in BREVE_BLOCK_NAMES for kind in ("acc", "rate")]
     + ["sat_v_c_acc", "sat_v_c_rate", "sat_v_max"]
 )
+NULL_SPACE_FLAGS = tuple(f"sat_{NULL_SPACE_BLOCK}_{kind}" for kind in ("acc", "rate"))
 
-# One log row as the kernel writes it; the mission adds ``t`` and ``step``. A field of width
-# one is a scalar column (the limit flags are written as booleans), a wider one a fixed-size
-# list of float64.
-ROW_FIELDS = (("tau", 1), ("q", 13), ("v", 12), ("v_c", 3), ("v_breve", 9), ("v_breve_des", 9),
-              ("x_tilde", 9), ("u_cmd", 12), ("u_applied", 12), ("s_min_G", 1), ("kappa_G", 1),
-              ("s_min_J", 1), ("kappa_J", 1), ("gamma", 1), ("dt_mu_max", 1),
-              ("pointing_err_deg", 1), ("boresight_err_deg", 1), ("com_err", 1), ("coverage", 1),
-              ("attitude_excursion_deg", 1), *((f, 1) for f in LIMIT_FLAGS))
-ROW_SIZE = sum(n for _, n in ROW_FIELDS)
+# The row's scalar fields after its vectors, in order.
+ROW_SCALARS = ("s_min_G", "kappa_G", "s_min_J", "kappa_J", "gamma", "dt_mu_max",
+               "pointing_err_deg", "boresight_err_deg", "com_err", "coverage",
+               "attitude_excursion_deg")
+SCALAR_COLUMNS = ("t", "tau", *ROW_SCALARS)
 
-VECTOR_COLUMNS = {name: n for name, n in ROW_FIELDS if n > 1}
-SCALAR_COLUMNS = ("t", *(name for name, n in ROW_FIELDS if n == 1 and name not in LIMIT_FLAGS))
+
+def limit_flags(shape: RobotShape) -> tuple[str, ...]:
+    """The limit flags of a log of ``shape``, in the row's order (eq. 16)."""
+    return LIMIT_FLAGS + (NULL_SPACE_FLAGS if shape.null_space_dim else ())
+
+
+@functools.lru_cache(maxsize=16)
+def row_fields(shape: RobotShape) -> tuple[tuple[str, int], ...]:
+    """One log row of ``shape`` as the kernel writes it; the mission adds ``t`` and ``step``.
+    A field of width one is a scalar column; the vectors are fixed-size lists of float64
+    (q nq, v nv, v̆ 9 + k, x̃ 9, u nv); ``limit_flags`` holds the flags of
+    :func:`limit_flags`, each written as a boolean column."""
+    return (("tau", 1), ("q", shape.nq), ("v", shape.nv), ("v_c", 3),
+            ("v_breve", shape.n_breve), ("v_breve_des", shape.n_breve),
+            ("x_tilde", TASK_ERROR_SIZE), ("u_cmd", shape.nv), ("u_applied", shape.nv),
+            *((name, 1) for name in ROW_SCALARS), ("limit_flags", len(limit_flags(shape))))
+
+
+def row_size(shape: RobotShape) -> int:
+    """The row's width in floats."""
+    return sum(n for _, n in row_fields(shape))
+
+
+def vector_columns(shape: RobotShape) -> dict[str, int]:
+    """The log's vector columns of ``shape`` and their widths."""
+    return {name: n for name, n in row_fields(shape) if n > 1 and name != "limit_flags"}

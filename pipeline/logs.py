@@ -21,7 +21,6 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic_files import atomic_target, cannot_write
 from pipeline.errors import LogDamaged, LogError, SpecError
-from pipeline.log_layout import VECTOR_COLUMNS
 from pipeline.paths import find_on_search_path
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, file_digest, library_versions
@@ -311,12 +310,17 @@ def read_footer(path: Path) -> tuple[LogMeta, int]:
     return _meta(Path(path), pf), pf.metadata.num_rows
 
 
-def _to_numpy(col: pa.ChunkedArray | pa.Array, width: int | None) -> np.ndarray:
+def _to_numpy(col: pa.ChunkedArray | pa.Array) -> np.ndarray:
+    """A column as an array: a vector column (a fixed-size list, as the logs are written) as
+    N×width, its width from its type."""
     if isinstance(col, pa.ChunkedArray):
         col = col.combine_chunks()
-    if width is None:
-        return col.to_numpy(zero_copy_only=False)
-    return col.flatten().to_numpy(zero_copy_only=False).reshape(-1, width)
+    if pa.types.is_fixed_size_list(col.type):
+        return col.flatten().to_numpy(zero_copy_only=False).reshape(-1, col.type.list_size)
+    if pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
+        raise LogError(f"a vector column of variable length ({col.type}); the logs' vectors "
+                       "are fixed-size lists")
+    return col.to_numpy(zero_copy_only=False)
 
 
 def require_columns(path: Path, columns: list[str]) -> None:
@@ -347,24 +351,27 @@ def _row_groups(path: Path, pf: pq.ParquetFile, columns: list[str], start: int,
                 stop: int | None) -> Iterator[dict[str, np.ndarray]]:
     _check_columns(path, pf, columns)
     stop = pf.metadata.num_rows if stop is None else stop
-    offset = 0
+    offset, read = 0, False
     for rg in range(pf.num_row_groups):
         n = pf.metadata.row_group(rg).num_rows
         lo, hi = max(start - offset, 0), min(stop - offset, n)
         if hi > lo:
             t = pf.read_row_group(rg, columns=columns)
-            yield {c: _to_numpy(t.column(c), VECTOR_COLUMNS.get(c))[lo:hi] for c in columns}
+            yield {c: _to_numpy(t.column(c))[lo:hi] for c in columns}
+            read = True
         offset += n
         if offset >= stop:
             break
+    if not read:  # no rows in range: empty columns of the file's types (vectors 0×width)
+        schema = pf.schema_arrow
+        yield {c: _to_numpy(pa.array([], type=schema.field(c).type)) for c in columns}
 
 
 def concat_columns(chunks: Iterable[dict[str, np.ndarray]], columns: list[str]
                    ) -> dict[str, np.ndarray]:
-    """Chunks of the same columns joined along time (empty arrays for no chunk)."""
+    """Chunks of the same columns joined along time (at least one chunk: a file's reader
+    yields empty columns of its types when no row is in range)."""
     parts = list(chunks)
-    if not parts:
-        return {c: np.empty((0, VECTOR_COLUMNS[c]) if c in VECTOR_COLUMNS else 0) for c in columns}
     return {c: np.concatenate([p[c] for p in parts]) for c in columns}
 
 
@@ -573,7 +580,7 @@ def _check_rows(path: Path, pf: pq.ParquetFile, dt: float, digest: TableDigest |
             typ = col.type.value_type if pa.types.is_fixed_size_list(col.type) else col.type
             if not pa.types.is_floating(typ):
                 continue
-            x = _to_numpy(col, VECTOR_COLUMNS.get(name))
+            x = _to_numpy(col)
             ok = (~np.isnan(x) & (x != -np.inf)) if name in MAY_BE_INFINITE else np.isfinite(x)
             if x.ndim > 1:
                 ok = ok.all(axis=1)

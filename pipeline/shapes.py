@@ -23,10 +23,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from pipeline.log_layout import BREVE_BLOCK_NAMES
-
 # A task-space arm moves the camera in six degrees of freedom (eq. 3): it needs six joints.
 TASK_DOF = 6
+# The reduced velocity v̆'s task blocks (eq. 10), three components each: the bus's angular
+# velocity and the camera's linear and angular velocity about the CoM; a redundant arm's
+# null-space velocities follow them (eq. 37).
+BREVE_BLOCK_NAMES = ("omega_b", "nu_e_lin", "nu_e_ang")
+NULL_SPACE_BLOCK = "null_space"
+# The task error x̃ and the task part of v̆ have this many components (eq. 14).
+TASK_ERROR_SIZE = 3 * len(BREVE_BLOCK_NAMES)
 # The log's columns of a generalised force (the dual of v: bus force, bus torque, joint
 # torques) and of the reduced velocity's blocks (eq. 10).
 GENERALISED_FORCES = ("u_cmd", "u_applied")
@@ -100,6 +105,22 @@ class RobotShape:
     def nv(self) -> int:
         return 6 + self.n
 
+    @property
+    def null_space_dim(self) -> int:
+        """k = n − 6: the arm's self-motion coordinates (eq. 37; 0 for a six-joint arm)."""
+        return self.n - TASK_DOF
+
+    @property
+    def n_breve(self) -> int:
+        """The reduced velocity v̆'s size: 9 task components and k null-space ones (eqs. 10,
+        37)."""
+        return TASK_ERROR_SIZE + self.null_space_dim
+
+    @property
+    def breve_blocks(self) -> tuple[str, ...]:
+        """v̆'s blocks by name (eqs. 10, 37): the task blocks, then the null space if any."""
+        return BREVE_BLOCK_NAMES + ((NULL_SPACE_BLOCK,) if self.null_space_dim else ())
+
     def labels(self, column: str) -> tuple[str, ...]:
         """The component labels of a log's vector column ``column``, as a labelled table
         shows them: ``p_b.x``, ``quat_tb.w``, ``q.<joint>`` for q; ``v_b.x``, ``omega_b.z``,
@@ -116,9 +137,13 @@ class RobotShape:
         if column in GENERALISED_FORCES:
             return (*_axes(f"{column}.f_b"), *_axes(f"{column}.tau_b"),
                     *(f"{column}.{j}" for j in self.joints))
-        if column in REDUCED_VECTORS or column == "x_tilde":
-            blocks = BREVE_BLOCK_NAMES if column in REDUCED_VECTORS else TASK_ERROR_BLOCKS
-            return tuple(label for block in blocks for label in _axes(f"{column}.{block}"))
+        if column in REDUCED_VECTORS:
+            null = tuple(f"{column}.{NULL_SPACE_BLOCK}.{i}" for i in range(self.null_space_dim))
+            return (*(label for block in BREVE_BLOCK_NAMES
+                      for label in _axes(f"{column}.{block}")), *null)
+        if column == "x_tilde":
+            return tuple(label for block in TASK_ERROR_BLOCKS
+                         for label in _axes(f"{column}.{block}"))
         if column == "v_c":
             return _axes("v_c")
         raise KeyError(f"no labels for a vector column {column!r}")

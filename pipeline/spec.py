@@ -158,12 +158,26 @@ class Limits(_Block):
     v_max: Positive = 50.0
 
 
+class NullSpaceImpedance(_Block):
+    """A redundant arm's null-space impedance (eq. 37f): the stiffness ``K`` (N·m/rad) on the
+    posture error q − q̄ seen along the null-space basis Z̃, the damping ``D`` (N·m·s/rad) on
+    the null-space velocity ν_n, and ν_n's rate (rad/s) and acceleration (rad/s²) bounds
+    (eq. 16). Only a redundant arm (n > 6) has one; it has no default, as it sets a damping
+    mode of its own (μ = eig(Λ_n⁻¹ D))."""
+
+    K: NonNegative = 0.0
+    D: Positive
+    rate: Positive = 1.0
+    acc: Positive = 10.0
+
+
 class Controller(_Block):
     integrator: Literal["explicit", "imex"] = "explicit"
     gains: Gains = Gains()
     com: ComGains = ComGains()
     base: BaseBlock = BaseBlock()
     limits: Limits = Limits()
+    null_space: NullSpaceImpedance | None = None
 
 
 class Plant(_Block):
@@ -309,6 +323,11 @@ INERT_FIELDS = (("config_sampling", "low"), ("config_sampling", "high"),
                 ("config_sampling", "floor"), ("robot", "package_dirs"))
 
 
+# Fields that came after specs were hashed, and the value that means "not set": no locked
+# joints, no null-space impedance (a six-joint arm).
+UNSET_FIELDS = (("robot", "locked_joints", {}), ("controller", "null_space", None))
+
+
 def spec_hash_of(content: dict[str, Any]) -> str:
     """The spec hash of a spec's content (a resolved spec as JSON): the canonical hash of all
     of it but its name, its description and the ``INERT_FIELDS``."""
@@ -316,9 +335,11 @@ def spec_hash_of(content: dict[str, Any]) -> str:
     for block, key in INERT_FIELDS:
         if isinstance(d.get(block), dict):
             d[block] = {k: v for k, v in d[block].items() if k != key}
-    # No locked joints is the spec as it was before the field: its hash is unchanged.
-    if isinstance(d.get("robot"), dict) and d["robot"].get("locked_joints") == {}:
-        d["robot"] = {k: v for k, v in d["robot"].items() if k != "locked_joints"}
+    # Fields added since, at their unset value, are the spec as it was before them: its hash
+    # is unchanged.
+    for block, key, unset in UNSET_FIELDS:
+        if isinstance(d.get(block), dict) and key in d[block] and d[block][key] == unset:
+            d[block] = {k: v for k, v in d[block].items() if k != key}
     return canonical_hash(d)
 
 

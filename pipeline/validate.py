@@ -16,11 +16,12 @@ from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
 from pipeline.shapes import Q
 from pipeline.sim.margins import dominant_root, gain_margin, loop_gain, root_regime
 from pipeline.sim.robot_file import RobotCard
-from pipeline.sim.stability import DampingMode, ModeFixes
+from pipeline.sim.stability import GAIN_FIELDS, DampingMode, ModeFixes
 from pipeline.spec import Spec, load_spec
 
 # The units of each gain block's damping gain (eq. 13).
-GAIN_UNITS = {"bus": "N·m·s/rad", "cam_pos": "N·s/m", "cam_ori": "N·m·s/rad"}
+GAIN_UNITS = {"bus": "N·m·s/rad", "cam_pos": "N·s/m", "cam_ori": "N·m·s/rad",
+              "null_space": "N·m·s/rad"}
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
     f = v.fixes
     fast = f.mode
     listed = ", ".join(f"{m.mu:.4g} ({m.name})" for m in v.modes)
-    gain = f"controller.gains.{f.gain_block}.D"
+    gain = GAIN_FIELDS[f.gain_block]
     unit = GAIN_UNITS[f.gain_block]
     lines = [
         f"  damping modes at the start, μ of M̆⁻¹D̆ in 1/s (eq. 21), fastest first: {listed}",

@@ -50,7 +50,7 @@ def runs(tmp_path_factory) -> dict[str, Path]:
     with pytest.MonkeyPatch.context() as mp:
         stiffer = np.diag([1.01] * 3 + [1.0] * 6)  # the bus block of K̆ (eq. 13)
         mp.setattr(mission, "block_gains",
-                   lambda ctrl, g: (gains(ctrl, g)[0] @ stiffer, gains(ctrl, g)[1]))
+                   lambda ctrl, g, k=0: (gains(ctrl, g, k)[0] @ stiffer, gains(ctrl, g, k)[1]))
         out["regressed"] = run_spec(spec, tmp / "regressed", raise_on_failure=False).path
     return out
 

@@ -9,16 +9,10 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.log_layout import ROW_FIELDS, ROW_SIZE
+from pipeline.log_layout import limit_flags
 from pipeline.sim import jit as jit_mod
 from pipeline.sim.base_guidance import REFERENCE_FIELDS, read_reference
-from pipeline.sim.control_step import (
-    CONTROLLER_FIELDS,
-    ROW,
-    STATE_FIELDS,
-    controller_step,
-    read_params,
-)
+from pipeline.sim.control_step import controller_step, read_params
 from pipeline.sim.layout import offsets, pack, unpack
 from pipeline.sim.linalg import batched_singular_values, svd_right
 from pipeline.sim.mission import Mission
@@ -31,32 +25,42 @@ def mission() -> Mission:
     return Mission(with_overrides(load_spec("short_nominal"), {"mission.duration": 1.0}))
 
 
-def test_layouts_have_unique_names_and_cover_the_log():
-    from pipeline.log_layout import LIMIT_FLAGS, SCALAR_COLUMNS, VECTOR_COLUMNS
+@pytest.fixture(scope="module")
+def layout(mission):
+    return mission.layout
 
-    for fields in (STATE_FIELDS, ROW_FIELDS, CONTROLLER_FIELDS, REFERENCE_FIELDS):
+
+def test_layouts_have_unique_names_and_cover_the_log(layout):
+    from pipeline.log_layout import SCALAR_COLUMNS, vector_columns
+
+    for fields in (layout.state_fields, layout.row_fields, layout.controller_fields,
+                   REFERENCE_FIELDS):
         names = [n for n, _ in fields]
         assert len(names) == len(set(names))
-    row = dict(ROW_FIELDS)
-    assert {c: row[c] for c in VECTOR_COLUMNS} == VECTOR_COLUMNS
+    row = dict(layout.row_fields)
+    widths = vector_columns(layout.shape)
+    assert {c: row[c] for c in widths} == widths
+    assert widths["q"] == 13 and widths["v"] == widths["u_cmd"] == 12
+    assert widths["v_breve"] == widths["x_tilde"] == 9
     assert set(SCALAR_COLUMNS) - set(row) == {"t"}
-    assert all(row[f] == 1 for f in LIMIT_FLAGS)
+    assert row["limit_flags"] == len(limit_flags(layout.shape)) == 9
 
 
-def test_pack_rejects_unknown_fields_and_wrong_sizes():
+def test_pack_rejects_unknown_fields_and_wrong_sizes(layout):
     with pytest.raises(ValueError, match="nope"):
-        pack(STATE_FIELDS, {"nope": 1.0})
+        pack(layout.state_fields, {"nope": 1.0})
     with pytest.raises(ValueError, match="q: 3 values for 13"):
-        pack(STATE_FIELDS, {"q": np.zeros(3)})
+        pack(layout.state_fields, {"q": np.zeros(3)})
 
 
-def test_read_params_reads_each_named_field():
+def test_read_params_reads_each_named_field(layout):
     """Distinct values everywhere (one flag set, one clear): the kernel's reader gives each
     field back under its own name."""
-    values = {name: np.arange(n) + 0.25 + 100 * i for i, (name, n) in enumerate(CONTROLLER_FIELDS)}
+    fields = layout.controller_fields
+    values = {name: np.arange(n) + 0.25 + 100 * i for i, (name, n) in enumerate(fields)}
     values |= {"derate_gain": 1.0, "imex": 0.0}
-    got = read_params(pack(CONTROLLER_FIELDS, values))
-    assert got._fields == tuple(name for name, _ in CONTROLLER_FIELDS)
+    got = read_params(pack(fields, values), layout.places.controller)
+    assert got._fields == tuple(name for name, _ in fields)
     for name, want in values.items():
         if name in ("derate_gain", "imex"):
             assert getattr(got, name) is (want > 0.5), name
@@ -104,10 +108,10 @@ def distinct_step(mission):
     for _ in range(20):
         s, _ = mission.step(s)
     T = mission.robot.terms(s.q, s.v)
-    ctrl = unpack(CONTROLLER_FIELDS, mission.controller_vector())
+    ctrl = unpack(mission.layout.controller_fields, mission.controller_vector())
     ctrl |= {"k": ctrl["k"] * (1 + 0.01 * np.arange(9)),
              "d": ctrl["d"] * (1 + 0.013 * np.arange(9)),
-             "derate_gain": 1.0, "imex": 0.0, "k_posture": 0.37,
+             "derate_gain": 1.0, "imex": 0.0, "k_posture": 0.37, "k_null": 0.27,
              "acc_bounds": [0.031, 0.052, 0.073], "rate_bounds": [0.0041, 0.0062, 0.0083],
              "com_K": 0.21, "com_D": 0.43, "com_Ki": 0.057, "com_i_max": 1.1e-5,
              "v_c_acc": 7.1e-4, "v_c_rate": 0.0123, "v_max": 0.0131,
@@ -127,27 +131,28 @@ def distinct_step(mission):
 def _kernel_step(mission, q, v, ctrl, state, ref, layouts=None):
     """One call of the step kernel with the named inputs packed under ``layouts`` (default: the
     kernel's own); the row read under the kernel's layout and the state under ``layouts``."""
-    lay = {"ctrl": CONTROLLER_FIELDS, "state": STATE_FIELDS, "ref": REFERENCE_FIELDS,
+    own = mission.layout
+    lay = {"ctrl": own.controller_fields, "state": own.state_fields, "ref": REFERENCE_FIELDS,
            **(layouts or {})}
     vec = pack(lay["state"], state)
-    rows = np.zeros((1, ROW_SIZE))
+    rows = np.zeros((1, own.row_size))
     cov = CoverageCounter.start(mission.target, mission.spec.camera)
     try:
         with np.errstate(all="ignore"):
             controller_step(mission.robot.dynamics_inputs(q, v), pack(lay["ref"], ref),
-                            pack(lay["ctrl"], ctrl), vec, rows, 0, cov)
+                            pack(lay["ctrl"], ctrl), vec, rows, 0, cov, own.index)
     except (np.linalg.LinAlgError, ZeroDivisionError, ValueError) as exc:
         return type(exc).__name__
     return rows[0], unpack(lay["state"], vec)
 
 
-def _same(a, b, tol: float = 1e-8) -> bool:
+def _same(a, b, row_places, tol: float = 1e-8) -> bool:
     """Two results alike: the same exception, or every field of the row and of the state
     within ``tol`` of the largest entry (a change smaller than the tolerances of
     test_log_row.py would go unnoticed there, so it counts as no change)."""
     if isinstance(a, str) or isinstance(b, str):
         return a == b
-    fields = [(a[0][sl], b[0][sl]) for sl in ROW.values()]
+    fields = [(a[0][sl], b[0][sl]) for sl in row_places.values()]
     fields += [(a[1][k], b[1][k]) for k in a[1]]
     return all(np.all(np.isfinite(y)) and np.max(np.abs(x - y)) <= tol * np.max(np.abs(x))
                for x, y in fields)
@@ -156,15 +161,19 @@ def _same(a, b, tol: float = 1e-8) -> bool:
 @pytest.mark.parametrize("layout", ["ctrl", "state", "ref"])
 def test_swapping_two_input_fields_changes_the_step(distinct_step, layout):
     mission, q, v, ctrl, state, ref = distinct_step
-    fields = {"ctrl": CONTROLLER_FIELDS, "state": STATE_FIELDS, "ref": REFERENCE_FIELDS}[layout]
+    own = mission.layout
+    fields = {"ctrl": own.controller_fields, "state": own.state_fields,
+              "ref": REFERENCE_FIELDS}[layout]
     base = _kernel_step(mission, q, v, ctrl, state, ref)
     assert not isinstance(base, str), base
     assert np.all(np.isfinite(base[0])) and all(np.all(np.isfinite(x)) for x in base[1].values())
     unchanged = [(fields[i][0], fields[j][0])
                  for i in range(len(fields)) for j in range(i + 1, len(fields))
                  if _same(base, _kernel_step(mission, q, v, ctrl, state, ref,
-                                             {layout: _swapped(fields, i, j)}))]
-    assert unchanged == []
+                                             {layout: _swapped(fields, i, j)}), own.row)]
+    # The null-space stiffness is a redundant arm's: a six-joint step never reads it, so its
+    # swap with a flag (derate_gain 1, imex 0: no value differs from both) cannot show here.
+    assert set(unchanged) <= {("k_null", "imex"), ("derate_gain", "k_null")}, unchanged
 
 
 def test_swapping_two_row_fields_changes_the_log(distinct_step):
@@ -173,6 +182,9 @@ def test_swapping_two_row_fields_changes_the_log(distinct_step):
     which the bounds are 0 or 10⁹ by the bits of each flag's number, so the nine flags' values
     across the steps differ pairwise (and are checked: a bound of 0 binds, 10⁹ does not)."""
     mission, q, v, ctrl, state, ref = distinct_step
+    own = mission.layout
+    ROW, ROW_FIELDS = own.row, own.row_fields
+    flags = limit_flags(own.shape)
     rows = [_kernel_step(mission, q, v, ctrl, state, ref)[0]]
     for bit in range(4):
         c = {k: np.array(x, dtype=float) for k, x in ctrl.items()}
@@ -181,10 +193,11 @@ def test_swapping_two_row_fields_changes_the_log(distinct_step):
             want[flag] = bool((n >> bit) & 1)
             c[field].reshape(-1)[block] = 0.0 if want[flag] else 1e9
         row = _kernel_step(mission, q, v, c, state, ref)[0]
-        got = {flag: bool(row[ROW[flag].start]) for flag in FLAG_BOUNDS}
+        got = {flag: bool(row[ROW["limit_flags"].start + flags.index(flag)])
+               for flag in FLAG_BOUNDS}
         assert got == want
         rows.append(row)
-    assert set(FLAG_BOUNDS) == {name for name, _ in ROW_FIELDS if name.startswith("sat_")}
+    assert set(FLAG_BOUNDS) == set(flags)
     # The kernel writes u_applied as a copy of u_cmd and attitude_excursion_deg as 0 (the
     # sampled-data plant overwrites both, by name): no swap involving them shows here (0 also
     # being this step's coverage). test_actuation reads them where they differ.

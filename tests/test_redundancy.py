@@ -70,8 +70,8 @@ def test_six_joints_reduce_to_eqs_5_and_6():
                                                             robot.mass)
     ns = rd.null_space_terms(J_oplus, G_wb, M, robot.mass, robot.floor, robot.damping)
     assert ns.Z.shape == (6, 0) and ns.Y.shape == (0, 9)
-    np.testing.assert_array_equal(rd.extended_gamma(R_tb, p_bc, J_bar_v, G_wb, J_oplus, ns.Y),
-                                  gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus))
+    gamma = gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus)
+    np.testing.assert_array_equal(rd.extended_gamma(gamma, ns.Y), gamma)
     eq6 = gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, np.linalg.inv(J_oplus))
     np.testing.assert_allclose(rd.extended_gamma_inverse(R_tb, p_bc, J_bar_v, ns), eq6,
                                rtol=0, atol=1e-10)

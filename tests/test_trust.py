@@ -20,8 +20,9 @@ from conftest import footer_metadata, run_cli
 from pipeline.analysis.stages import analyze_log
 from pipeline.claims.baselines import compare_logs
 from pipeline.errors import LogDamaged
-from pipeline.log_layout import VECTOR_COLUMNS
+from pipeline.log_layout import vector_columns
 from pipeline.logs import MAY_BE_INFINITE, read_meta, verify_log
+from pipeline.sim.robot_file import load_spec_robot, robot_shape
 from pipeline.sim.run import run_spec
 from pipeline.spec import load_spec, with_overrides
 
@@ -118,7 +119,8 @@ def _numeric_columns(path: Path) -> list[str]:
 
 def test_every_numeric_column_is_covered(log):
     cols = set(_numeric_columns(log))
-    assert {"t", "tau", "s_min_G", "kappa_G", "dt_mu_max", "coverage", *VECTOR_COLUMNS} <= cols
+    widths = vector_columns(robot_shape(load_spec_robot(load_spec("nominal"))))
+    assert {"t", "tau", "s_min_G", "kappa_G", "dt_mu_max", "coverage", *widths} <= cols
 
 
 def test_a_nan_in_any_numeric_column_is_refused_at_its_step(log, tmp_path):
@@ -316,11 +318,13 @@ def test_a_sweep_of_a_million_points_is_refused_before_its_grid_is_built(tmp_pat
 
 def test_the_budget_row_width_is_the_logs():
     from pipeline.budget import ROW_FLOATS
-    from pipeline.sim.control_step import ROW
+    from pipeline.sim.mission import Mission
 
-    # the kernel's row ends where the budget says a row does, and the fields tile it
-    assert ROW_FLOATS == max(sl.stop for sl in ROW.values())
-    assert sum(sl.stop - sl.start for sl in ROW.values()) == ROW_FLOATS
+    # a six-joint arm's kernel row ends where the budget says a row does, and the fields
+    # tile it
+    row = Mission(load_spec("nominal")).layout.row
+    assert ROW_FLOATS == max(sl.stop for sl in row.values())
+    assert sum(sl.stop - sl.start for sl in row.values()) == ROW_FLOATS
 
 
 def test_budget_overrides_are_validated(monkeypatch):

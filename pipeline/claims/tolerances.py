@@ -55,7 +55,6 @@ from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import SpecError
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, library_versions, sim_version
-from pipeline.sim.control_step import STATE
 from pipeline.sim.mission import LoopState, Mission
 from pipeline.spec import Spec, load_spec
 
@@ -97,7 +96,7 @@ class NudgedMission(Mission):
     def _advance(self, k, state, rows, ctrl, coverage) -> bool:
         finite = super()._advance(k, state, rows, ctrl, coverage)
         if self.rng is not None:
-            for sl in (STATE["q"], STATE["v"]):
+            for sl in (self.layout.state["q"], self.layout.state["v"]):
                 way = self.rng.integers(-1, 2, sl.stop - sl.start)  # −1, 0 or +1 ulp
                 x = state[sl]
                 state[sl] = np.where(way == 0, x, np.nextafter(x, way * np.inf))

@@ -1,6 +1,8 @@
-"""Attitude and camera loop on the reduced velocity v̆ = [ω_b; ν_e⊕] (eqs. 13–16).
+"""Attitude and camera loop on the reduced velocity v̆ = [ω_b; ν_e⊕] (eqs. 13–16), and a
+redundant arm's null-space velocity ν_n below them (v̆ = [ω_b; ν_e⊕; ν_n], eq. 37f).
 
     RHS = −C̆ v̆ − D̆ (v̆ − v̆_des) − J_xᵀ K̆ x̃ − (C_c + D̆ G_vc) ẋ̃_c + posture + FF
+          [+ null-space stiffness in ν_n's rows]
 
 Each term is a named function so the cross-check can point at it. Two integrators advance v̆:
 ``explicit`` (forward Euler, eq. 15a) and ``imex`` (damping implicit, eq. 15b).
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.shapes import TASK_ERROR_SIZE
 from pipeline.sim.jit import jit
 from pipeline.sim.limits import saturate_blocks
 from pipeline.sim.linalg import cholesky_lower, eigvalsh, inverse, matmul, matvec, solve
@@ -29,8 +32,17 @@ def damping_term(D_breve: np.ndarray, v_breve: np.ndarray, v_breve_des: np.ndarr
 
 @jit
 def stiffness_term(J_x: np.ndarray, K_breve: np.ndarray, x_tilde: np.ndarray) -> np.ndarray:
-    """−J_xᵀ K̆ x̃ (eq. 13c)."""
+    """−J_xᵀ K̆ x̃ (eq. 13c): the task rows (nine)."""
     return -matvec(np.ascontiguousarray(J_x.T), matvec(np.ascontiguousarray(K_breve), x_tilde))
+
+
+@jit
+def null_space_stiffness_term(gamma_inv: np.ndarray, k_null: float, q_joint: np.ndarray,
+                              q_bar: np.ndarray) -> np.ndarray:
+    """−K_n Z̃ᵀ (q − q̄) (eq. 37f): the null-space spring on the posture error, ν_n's rows;
+    Z̃ = Γ⁻¹[6:, 12:], the joint motion per unit ν_n (eq. 37d)."""
+    Z_T = np.ascontiguousarray(gamma_inv[6:, 12:].T)
+    return -matvec(Z_T, k_null * (q_joint - q_bar))
 
 
 @jit
@@ -63,15 +75,25 @@ def feedforward_term(M_breve: np.ndarray, v_breve_dot_des: np.ndarray, C_breve: 
 
 @jit
 def breve_rhs(M_breve, C_breve, C_c, gamma_inv, v_breve, v_breve_dot_des, err, K_breve,
-              D_breve, k_posture, q_joint, q_bar):
-    """RHS of eq. 13: the sum of its named terms, with the task errors ``err`` (``TaskErrors``,
-    eq. 14)."""
-    return (coriolis_term(C_breve, v_breve)
-            + damping_term(D_breve, v_breve, err.v_breve_des)
-            + stiffness_term(err.J_x, K_breve, err.x_tilde)
-            + com_coupling_term(C_c, D_breve, err.G_vc, err.com_vel_err)
-            + posture_term(gamma_inv, k_posture, q_joint, q_bar)
-            + feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
+              D_breve, k_posture, q_joint, q_bar, k_null):
+    """RHS of eq. 13 (37f): the sum of its named terms, with the task errors ``err``
+    (``TaskErrors``, eq. 14); a redundant arm's ν_n rows have no task stiffness and the
+    null-space spring instead."""
+    stiffness = stiffness_term(err.J_x, K_breve, err.x_tilde)
+    redundant = v_breve.size > TASK_ERROR_SIZE
+    if redundant:
+        padded = np.zeros(v_breve.size)
+        padded[:TASK_ERROR_SIZE] = stiffness
+        stiffness = padded
+    rhs = (coriolis_term(C_breve, v_breve)
+           + damping_term(D_breve, v_breve, err.v_breve_des)
+           + stiffness
+           + com_coupling_term(C_c, D_breve, err.G_vc, err.com_vel_err)
+           + posture_term(gamma_inv, k_posture, q_joint, q_bar)
+           + feedforward_term(M_breve, v_breve_dot_des, C_breve, err.v_breve_des))
+    if redundant:
+        rhs[TASK_ERROR_SIZE:] += null_space_stiffness_term(gamma_inv, k_null, q_joint, q_bar)
+    return rhs
 
 
 @jit

@@ -27,8 +27,16 @@ def offsets(fields: Layout) -> dict[str, slice]:
 def field_places(name: str, fields: Layout) -> tuple:
     """A namedtuple ``name`` with one entry per field: the field's index for a one-value field
     (a scalar reads as one), its slice otherwise."""
-    places = [sl.start if sl.stop - sl.start == 1 else sl for sl in offsets(fields).values()]
-    return namedtuple(name, [f for f, _ in fields])(*places)
+    return places(namedtuple(name, [f for f, _ in fields]), fields)
+
+
+def places(cls: type, fields: Layout) -> tuple:
+    """The namedtuple class ``cls`` (its fields those of ``fields``, in order) holding each
+    field's index for a one-value field, its slice otherwise."""
+    if tuple(cls._fields) != tuple(f for f, _ in fields):
+        raise ValueError(f"{cls.__name__} has fields {cls._fields}, the layout {fields}")
+    at = [sl.start if sl.stop - sl.start == 1 else sl for sl in offsets(fields).values()]
+    return cls(*at)
 
 
 def pack(fields: Layout, values: dict) -> np.ndarray:

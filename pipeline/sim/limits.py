@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 
-from pipeline.log_layout import BREVE_BLOCK_NAMES
+from pipeline.shapes import BREVE_BLOCK_NAMES
 from pipeline.sim.jit import jit
 from pipeline.sim.linalg import dot
-from pipeline.spec import Limits
+from pipeline.spec import Limits, NullSpaceImpedance
 
 # Blocks of v̆ = [ω_b; ν_e,lin; ν_e,ang] and the limit names that bound each.
 # (The names and the flags are the log's, pipeline/log_layout.py.)
@@ -31,17 +31,24 @@ def saturate(x: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
 
 @jit
 def saturate_blocks(x: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Saturate each 3-block of a 9-vector by its bound; which blocks were limited."""
-    out = np.empty(9)
-    hit = np.zeros(3, dtype=np.bool_)
-    for b in range(3):
-        out[3 * b:3 * b + 3], hit[b] = saturate(x[3 * b:3 * b + 3], bounds[b])
+    """Saturate each block of v̆ by its bound: the three task blocks of three components, then
+    a redundant arm's null-space block, the rest (eq. 37f); which blocks were limited."""
+    out = np.empty(x.size)
+    hit = np.zeros(bounds.size, dtype=np.bool_)
+    for b in range(bounds.size):
+        hi = 3 * b + 3 if b < 3 else x.size
+        out[3 * b:hi], hit[b] = saturate(x[3 * b:hi], bounds[b])
     return out, hit
 
 
 @functools.lru_cache(maxsize=64)
-def breve_bounds(lim: Limits, kind: str) -> np.ndarray:
-    """The bounds of the three v̆ blocks for ``kind`` 'acc' or 'rate'."""
-    b = np.array([getattr(lim, f"{name}_{kind}") for name, _ in BREVE_BLOCKS])
-    b.flags.writeable = False
-    return b
+def breve_bounds(lim: Limits, kind: str, null_space: NullSpaceImpedance | None = None
+                 ) -> np.ndarray:
+    """The bounds of v̆'s blocks for ``kind`` 'acc' or 'rate': the three task blocks', then a
+    redundant arm's null-space block's (``controller.null_space``) when given."""
+    b = [getattr(lim, f"{name}_{kind}") for name, _ in BREVE_BLOCKS]
+    if null_space is not None:
+        b.append(getattr(null_space, kind))
+    out = np.array(b)
+    out.flags.writeable = False
+    return out

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.sim.stability import GAIN_BLOCKS, damping_modes, with_gain
+from pipeline.sim.stability import GAIN_BLOCKS, GAIN_FIELDS, block_slices, damping_modes, with_gain
 
 UNIT = 1.0  # a root of this modulus is on the unit circle: marginal
 
@@ -282,12 +282,13 @@ def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integ
     out.append(_fix(f"mission.dt ≤ {dt_ok:.4g} s" if dt_ok else "mission.dt: none suffices",
                     dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req))
     D, cuts = D_breve.copy(), {}
-    for b, block in enumerate(GAIN_BLOCKS):
+    for b, sl in enumerate(block_slices(len(D_breve))):
+        block = GAIN_BLOCKS[b]
         def block_meets(d: float, b: int = b, D: np.ndarray = D) -> bool:
             return all(_meets_fast(loop_gain(dt * m.mu, integrator), delay, req)
                        for m in damping_modes(M_breve, with_gain(D, b, d)) if m.block == b)
 
-        now = float(D[3 * b, 3 * b])
+        now = float(D[sl.start, sl.start])
         if block_meets(now):
             continue
         # The spec's damping gains are positive: the search stops a millionth above zero.
@@ -296,8 +297,11 @@ def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integ
             cuts = {}
             break
         D, cuts[block] = with_gain(D, b, d_ok), d_ok
-    words = ", ".join(f"{k}.D ≤ {v:.4g}" for k, v in cuts.items())
-    out.append(_fix(f"controller.gains: {words}" if cuts else
+    task = ", ".join(f"{k}.D ≤ {v:.4g}" for k, v in cuts.items() if k != "null_space")
+    words = "; ".join([*([f"controller.gains: {task}"] if task else []),
+                       *([f"{GAIN_FIELDS['null_space']} ≤ {cuts['null_space']:.4g}"]
+                         if "null_space" in cuts else [])])
+    out.append(_fix(words if cuts else
                     "controller.gains: as they are" if out[0].meets else
                     "controller.gains: no cut of the damping gains suffices",
                     None, M_breve, D if cuts else D_breve, dt, integrator, delay, req,

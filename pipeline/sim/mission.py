@@ -24,19 +24,17 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from pipeline.log_layout import LIMIT_FLAGS, ROW_SIZE, SCALAR_COLUMNS, VECTOR_COLUMNS
+from pipeline.log_layout import SCALAR_COLUMNS, limit_flags, vector_columns
 from pipeline.logs import ROW_GROUP, concat_columns
 from pipeline.shapes import Q
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import REFERENCE_SIZE, BaseGuidance, Reference
 from pipeline.sim.breve_controller import damping_rates
 from pipeline.sim.control_step import (
-    CONTROLLER_FIELDS,
-    ROW,
-    STATE,
-    STATE_FIELDS,
+    StepLayout,
     TaskErrors,
     controller_step,
+    step_layout,
     task_error_terms,
 )
 from pipeline.sim.layout import pack
@@ -59,13 +57,6 @@ from pipeline.sim.stability import (
 )
 from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
-
-_Q, _V, _TAU, _DQ = STATE["q"], STATE["v"], STATE["tau"].start, STATE["dq"]
-_VC, _VB = STATE["v_c"], STATE["v_breve"]
-_DT_MU = ROW["dt_mu_max"].start
-_SAT_V_MAX = ROW["sat_v_max"].start
-_U_CMD, _U_APPLIED = ROW["u_cmd"], ROW["u_applied"]
-_EXCURSION = ROW["attitude_excursion_deg"].start
 
 # Divergence criterion (eq. 16): the v_max clip binding on this many consecutive steps. The
 # clip is the last guard, far above any commanded motion (50 against rate limits below 1), so
@@ -101,9 +92,11 @@ def task_errors(T: Terms, ref: Reference, gamma: float, v_c: np.ndarray) -> Task
     """Task errors and desired reduced velocity against the references (eq. 14).
 
     x̃ = [2ε_b; p_e − p_e,des; 2ε_e], J_x = blockdiag(E_b, R_te, E_e),
-    v̆_des = [R_bt γω_b,des; R_et γ(ṗ_e,des − ṗ_c,des); R_et γω_e,des], G_vc = [0; R_et; 0].
+    v̆_des = [R_bt γω_b,des; R_et γ(ṗ_e,des − ṗ_c,des); R_et γω_e,des; 0],
+    G_vc = [0; R_et; 0; 0] (the null-space rows of a redundant arm zero, eq. 37f).
     """
-    return task_error_terms(T.R_tb, T.R_te, T.p_e, T.p_c, ref, gamma, v_c)
+    return task_error_terms(T.R_tb, T.R_te, T.p_e, T.p_c, ref, gamma, v_c,
+                            T.M_hat.shape[0] - 3)
 
 
 class Mission:
@@ -114,6 +107,7 @@ class Mission:
         self.robot = robot or GiordanoRobot(spec)
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
+        self.layout: StepLayout = step_layout(self.robot.shape)
         self._reference = np.zeros(REFERENCE_SIZE)
         self._zero_q = np.zeros(self.robot.model.nq)
         # The sampled-data plant's own Pinocchio data and its held command (eq. 29).
@@ -136,8 +130,9 @@ class Mission:
         nv = self.robot.model.nv
         T0 = self.robot.terms(self.q0, np.zeros(nv), dynamics=False)
         v_c0 = self.v_c0.copy()
-        v0 = matvec(T0.gamma_inv, np.concatenate([v_c0, np.zeros(9)]))
-        return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(9))
+        n_breve = self.robot.shape.n_breve
+        v0 = matvec(T0.gamma_inv, np.concatenate([v_c0, np.zeros(n_breve)]))
+        return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(n_breve))
 
     def critical_steps(self, s: LoopState) -> tuple[float, float | None]:
         """(dt*_damping, dt*_map) at state ``s`` for the spec's integrator (eq. 24): 2/μ_max,
@@ -175,15 +170,17 @@ class Mission:
 
     def controller_vector(self) -> np.ndarray:
         """The spec's controller and the robot's constants as the step kernel reads them
-        (``CONTROLLER_FIELDS``); built per run, so a changed ``robot.q_bar`` is honoured."""
+        (``controller_fields``); built per run, so a changed ``robot.q_bar`` is honoured."""
         ctrl, robot = self.spec.controller, self.robot
-        lim, com, ramp = ctrl.limits, ctrl.com, ctrl.base.conditioning
-        K, D = block_gains(ctrl, 1.0)
-        return pack(CONTROLLER_FIELDS, {
+        lim, com, ramp, null = ctrl.limits, ctrl.com, ctrl.base.conditioning, ctrl.null_space
+        K, D = block_gains(ctrl, 1.0, robot.shape.null_space_dim)
+        return pack(self.layout.controller_fields, {
             "k": np.diag(K), "d": np.diag(D), "derate_gain": ctrl.base.derate.gain,
             "k_posture": ctrl.gains.posture, "q_bar": robot.q_bar,
+            "k_null": 0.0 if null is None else null.K,
             "imex": ctrl.integrator == "imex", "dt": self.dt,
-            "acc_bounds": breve_bounds(lim, "acc"), "rate_bounds": breve_bounds(lim, "rate"),
+            "acc_bounds": breve_bounds(lim, "acc", null),
+            "rate_bounds": breve_bounds(lim, "rate", null),
             "com_K": com.K, "com_D": com.D, "com_Ki": com.Ki, "com_i_max": com.i_max,
             "v_c_acc": lim.v_c_acc, "v_c_rate": lim.v_c_rate, "v_max": lim.v_max,
             "ramp_low": ramp.low, "ramp_high": ramp.high, "ramp_floor": ramp.floor,
@@ -195,17 +192,18 @@ class Mission:
         and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt, or the
         sampled-data plant's motion under the held command (eq. 29). Whether the new state is
         finite."""
-        robot, ref = self.robot, self._reference
+        robot, ref, at = self.robot, self._reference, self.layout.state
         sampled = self.spec.mission.plant.model == "sampled"
         if sampled:  # what the plant is at: (q_k, v_k)
-            q_k, v_k = state[_Q].copy(), state[_V].copy()
-        inputs = robot.dynamics_inputs(state[_Q], state[_V])
-        self.guidance.reference_into(ref, float(state[_TAU]), inputs.p_b)
-        finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage)
+            q_k, v_k = state[at["q"]].copy(), state[at["v"]].copy()
+        inputs = robot.dynamics_inputs(state[at["q"]], state[at["v"]])
+        self.guidance.reference_into(ref, float(state[at["tau"].start]), inputs.p_b)
+        finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage,
+                                 self.layout.index)
         if sampled:
             return finite and self._hold(state, rows[k], q_k, v_k)
-        q_new = pin.integrate(robot.model, state[_Q], state[_DQ])
-        state[_Q] = q_new
+        q_new = pin.integrate(robot.model, state[at["q"]], state[at["dq"]])
+        state[at["q"]] = q_new
         # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
         return finite and math.isfinite(q_new @ self._zero_q)
 
@@ -217,7 +215,8 @@ class Mission:
         ``u_applied`` is what the plant received, and the controller then measures
         ν = Γ(q) v. Whether the state is finite."""
         model, data, plant = self.robot.model, self._plant_data, self.spec.mission.plant
-        tau = row[_U_CMD].copy()
+        at, row_at = self.layout.state, self.layout.row
+        tau = row[row_at["u_cmd"]].copy()
         if not np.all(np.isfinite(tau)):
             return False
         if plant.delay_steps:
@@ -225,34 +224,36 @@ class Mission:
                 self._held = held_command(model, data, q_k, v_k, np.zeros_like(v_k))
             tau, self._held = self._held, tau
         tau, _ = limit_bus_torque(tau, plant.bus_torque_max)
-        row[_U_APPLIED] = tau
+        row[row_at["u_applied"]] = tau
         path: list[np.ndarray] = []
         q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps, path)
         if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
             return False
-        row[_EXCURSION] = math.degrees(attitude_excursion(q_k, path))
+        row[row_at["attitude_excursion_deg"].start] = math.degrees(attitude_excursion(q_k, path))
         nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
-        state[_Q], state[_V], state[_VC], state[_VB] = q, v, nu[:3], nu[3:]
+        state[at["q"]], state[at["v"]], state[at["v_c"]], state[at["v_breve"]] = (
+            q, v, nu[:3], nu[3:])
         return True
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
         the guard's dt·μ_max of eq. 21): the next state and the row to log. The same code as
         :meth:`run`'s steps; the row's coverage counts this step's view alone."""
-        state = pack(STATE_FIELDS, {
+        layout = self.layout
+        state = pack(layout.state_fields, {
             "q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve, "tau": s.tau,
             "integral": s.integral, "has_prev": s.v_breve_des_prev is not None,
-            "v_breve_des_prev": (np.zeros(9) if s.v_breve_des_prev is None
+            "v_breve_des_prev": (np.zeros(s.v_breve.size) if s.v_breve_des_prev is None
                                  else s.v_breve_des_prev)})
-        rows = np.zeros((1, ROW_SIZE))
+        rows = np.zeros((1, layout.row_size))
         self._advance(0, state, rows, self.controller_vector(),
                       CoverageCounter.start(self.target, self.spec.camera))
-        f = {name: state[sl].copy() for name, sl in STATE.items()}
+        f = {name: state[sl].copy() for name, sl in layout.state.items()}
         nxt = LoopState(q=f["q"], v=f["v"], v_c=f["v_c"], v_breve=f["v_breve"],
                         tau=float(f["tau"][0]), integral=f["integral"],
                         v_breve_des_prev=f["v_breve_des_prev"])
-        cols = log_columns(rows)
-        return nxt, {name: cols[name][0] for name in ROW}
+        cols = log_columns(layout, rows)
+        return nxt, {name: value[0] for name, value in cols.items() if name not in ("t", "step")}
 
     def run(self, progress: bool = False,
             sink: Callable[[dict[str, np.ndarray]], None] | None = None,
@@ -267,14 +268,16 @@ class Mission:
         """
         n = self.spec.n_steps
         size = max(1, min(n, chunk)) if sink is not None else max(n, 1)
-        rows = np.zeros((size, ROW_SIZE))
+        layout = self.layout
+        rows = np.zeros((size, layout.row_size))
         parts: list[dict[str, np.ndarray]] = []
         out = sink if sink is not None else parts.append
         first = 0  # the step of rows[0]
 
         def flush(count: int) -> None:
             # Copies: the buffer is reused for the next chunk.
-            out({k: np.array(v) for k, v in log_columns(rows[:count], self.dt, first).items()})
+            out({k: np.array(v) for k, v in log_columns(layout, rows[:count], self.dt,
+                                                        first).items()})
 
         def result(status: str, rows_logged: int, step: int | None = None,
                    error: str = "") -> MissionResult:
@@ -282,7 +285,7 @@ class Mission:
             return MissionResult(cols, status, step, error, warned, rows=rows_logged)
 
         s0 = self.initial_state()
-        state = pack(STATE_FIELDS, {"q": s0.q, "v": s0.v, "v_c": s0.v_c,
+        state = pack(layout.state_fields, {"q": s0.q, "v": s0.v, "v_c": s0.v_c,
                                     "v_breve": s0.v_breve, "integral": s0.integral})
         ctrl = self.controller_vector()
         coverage = CoverageCounter.start(self.target, self.spec.camera)
@@ -299,6 +302,8 @@ class Mission:
             mode, fix = self.guard_fix(s0)
             warned.append(map_warning(self.dt, dt_map, dt_damping, integrator, mode, fix))
         clipped = 0
+        dt_mu_at = layout.row["dt_mu_max"].start
+        v_max_at = layout.row["limit_flags"].start + limit_flags(layout.shape).index("sat_v_max")
         # Overflow shows as a non-finite state, caught below at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
                                              mininterval=0.5, desc=self.spec.name) as bar:
@@ -313,16 +318,16 @@ class Mission:
                 if not finite:
                     flush(i)
                     return result("failed", k, k, f"step {k}: {why}")
-                if explicit and not warned and rows[i, _DT_MU] > bound:
-                    mode, fix = self.guard_fix(row_state(rows[i]))
-                    warned.append(stability_warning(k, float(rows[i, _DT_MU]), bound, delay,
+                if explicit and not warned and rows[i, dt_mu_at] > bound:
+                    mode, fix = self.guard_fix(row_state(layout, rows[i]))
+                    warned.append(stability_warning(k, float(rows[i, dt_mu_at]), bound, delay,
                                                     mode, fix))
-                clipped = clipped + 1 if rows[i, _SAT_V_MAX] > 0.5 else 0
+                clipped = clipped + 1 if rows[i, v_max_at] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
                     flush(i + 1)
-                    fix = self.guard_fix(row_state(rows[i]))[1]
+                    fix = self.guard_fix(row_state(layout, rows[i]))[1]
                     return result("diverged", k + 1, k, divergence_message(
-                        k, float(rows[i, _DT_MU]), self.dt, fix))
+                        k, float(rows[i, dt_mu_at]), self.dt, fix))
                 if i + 1 == size and k + 1 < n:
                     flush(size)
                     first = k + 1
@@ -333,21 +338,25 @@ class Mission:
         return result("complete", n)
 
 
-def log_columns(rows: np.ndarray, dt: float = 0.0, first: int = 0) -> dict[str, np.ndarray]:
+def log_columns(layout: StepLayout, rows: np.ndarray, dt: float = 0.0, first: int = 0
+                ) -> dict[str, np.ndarray]:
     """The log's columns (architecture §6, in the log's order) from the kernel's rows
-    (``ROW_FIELDS``) of steps ``first``, ``first`` + 1, …; t = step·dt."""
+    (``layout.row_fields``) of steps ``first``, ``first`` + 1, …; t = step·dt."""
+    at = layout.row
     step = np.arange(first, first + len(rows), dtype=np.int64)
-    cols = {c: rows[:, ROW[c]] for c in VECTOR_COLUMNS}
-    cols |= {c: (step * dt if c == "t" else rows[:, ROW[c].start]) for c in SCALAR_COLUMNS}
-    cols |= {c: rows[:, ROW[c].start] > 0.5 for c in LIMIT_FLAGS}
+    cols = {c: rows[:, at[c]] for c in vector_columns(layout.shape)}
+    cols |= {c: (step * dt if c == "t" else rows[:, at[c].start]) for c in SCALAR_COLUMNS}
+    flags = at["limit_flags"].start
+    cols |= {c: rows[:, flags + i] > 0.5 for i, c in enumerate(limit_flags(layout.shape))}
     cols["step"] = step
     return cols
 
 
-def row_state(row: np.ndarray) -> LoopState:
-    """The state at the start of a logged step, from its row (``ROW_FIELDS``)."""
-    return LoopState(q=row[ROW["q"]].copy(), v=row[ROW["v"]].copy(), v_c=row[ROW["v_c"]].copy(),
-                     v_breve=row[ROW["v_breve"]].copy(), tau=float(row[ROW["tau"].start]))
+def row_state(layout: StepLayout, row: np.ndarray) -> LoopState:
+    """The state at the start of a logged step, from its row (``layout.row_fields``)."""
+    at = layout.row
+    return LoopState(q=row[at["q"]].copy(), v=row[at["v"]].copy(), v_c=row[at["v_c"]].copy(),
+                     v_breve=row[at["v_breve"]].copy(), tau=float(row[at["tau"].start]))
 
 
 def requirement_words(spec: Spec) -> str:

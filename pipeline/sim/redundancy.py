@@ -23,10 +23,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pipeline.sim.damped_inverse import damped_pinv
 from pipeline.sim.jit import jit
 from pipeline.sim.linalg import cholesky_lower, determinant, inverse, matmul, matvec, solve
 from pipeline.sim.rotations import skew
-from pipeline.sim.task_transform import damped_pinv, task_rows_into
 
 
 class NullSpace(NamedTuple):
@@ -94,42 +94,47 @@ def floating_inertia(M, mass):
 
 
 @jit
-def null_space_terms(J_oplus, G_wb, M, mass, floor, damping):
-    """The null-space terms of eq. 37 at one state, as a ``NullSpace``.
-
-    Λ_n = Z̃ᵀ H_qq Z̃;  Y = Λ_n⁻¹ Z̃ᵀ [H_qω, H_qq], so ν_n = Y w;
-    X_e = L⁻ᵀ (J⊕ L⁻ᵀ)⁺ with H_qq = L Lᵀ (the H_qq-weighted inverse of J⊕, damped as eq. 6);
-    X_ω = −X_e G_ωb − Z̃ Λ_n⁻¹ Z̃ᵀ H_qω.
-    """
+def null_space_map(J_oplus, M, mass):
+    """(Z̃, H, Λ_n, Y) at one state (eqs. 37a–c): the basis, the inertia at a still CoM, the
+    null-space inertia Λ_n = Z̃ᵀ H_qq Z̃ and the map ν_n = Y [ω_b; q̇],
+    Y = Λ_n⁻¹ Z̃ᵀ [H_qω, H_qq]. What Γ's null-space rows need and no more (the analysis'
+    rebuild of Γ from a logged q)."""
     n = J_oplus.shape[1]
     Z = null_space_basis(J_oplus)
     H = floating_inertia(M, mass)
-    H_qw = np.ascontiguousarray(H[3:, 0:3])
-    H_qq = np.ascontiguousarray(H[3:, 3:])
     Zt = np.ascontiguousarray(Z.T)
-    Lambda_n = matmul(Zt, matmul(H_qq, Z))
-    Lambda_n_inv = inverse(Lambda_n)
+    Lambda_n = matmul(Zt, matmul(np.ascontiguousarray(H[3:, 3:]), Z))
     ZtH = np.empty((Z.shape[1], 3 + n))
-    ZtH[:, 0:3] = matmul(Zt, H_qw)
-    ZtH[:, 3:] = matmul(Zt, H_qq)
-    Y = matmul(Lambda_n_inv, ZtH)
+    ZtH[:, 0:3] = matmul(Zt, np.ascontiguousarray(H[3:, 0:3]))
+    ZtH[:, 3:] = matmul(Zt, np.ascontiguousarray(H[3:, 3:]))
+    return Z, H, Lambda_n, matmul(inverse(Lambda_n), ZtH)
+
+
+@jit
+def null_space_terms(J_oplus, G_wb, M, mass, floor, damping):
+    """The null-space terms of eq. 37 at one state, as a ``NullSpace``.
+
+    Λ_n = Z̃ᵀ H_qq Z̃;  Y = Λ_n⁻¹ Z̃ᵀ [H_qω, H_qq], so ν_n = Y w (:func:`null_space_map`);
+    X_e = L⁻ᵀ (J⊕ L⁻ᵀ)⁺ with H_qq = L Lᵀ (the H_qq-weighted inverse of J⊕, damped as eq. 6);
+    X_ω = −X_e G_ωb − Z̃ Λ_n⁻¹ Z̃ᵀ H_qω = −X_e G_ωb − Z̃ Y_ω.
+    """
+    Z, H, Lambda_n, Y = null_space_map(J_oplus, M, mass)
+    H_qq = np.ascontiguousarray(H[3:, 3:])
     L_inv_t = np.ascontiguousarray(inverse(cholesky_lower(H_qq)).T)
     J_w = matmul(np.ascontiguousarray(J_oplus), L_inv_t)
     # The SVD kernel takes tall matrices: (Aᵀ)⁺ = (A⁺)ᵀ, damped alike (the same σ).
     J_w_inv_t, s_min, kappa = damped_pinv(np.ascontiguousarray(J_w.T), floor, damping)
     X_e = matmul(L_inv_t, np.ascontiguousarray(J_w_inv_t.T))
-    X_w = -matmul(X_e, np.ascontiguousarray(G_wb)) - matmul(
-        Z, matmul(Lambda_n_inv, np.ascontiguousarray(ZtH[:, 0:3])))
+    X_w = -matmul(X_e, np.ascontiguousarray(G_wb)) - matmul(Z, np.ascontiguousarray(Y[:, 0:3]))
     return NullSpace(Z=Z, H=H, Lambda_n=Lambda_n, Y=Y, X_w=X_w, X_e=X_e, s_min_J=s_min,
                      kappa_J=kappa)
 
 
 @jit
-def extended_gamma(R_tb, p_bc, J_bar_v, G_wb, J_oplus, Y):
-    """Γ (6+n square, eq. 37c): eq. 5's rows [v_c; ω_b; ν_e⊕] and ν_n = Y [ω_b; q̇]."""
-    n = J_oplus.shape[1]
-    g = np.zeros((6 + n, 6 + n))
-    task_rows_into(g, R_tb, p_bc, J_bar_v, G_wb, J_oplus)
+def extended_gamma(gamma_task, Y):
+    """Γ (6+n square, eq. 37c): eq. 5's rows [v_c; ω_b; ν_e⊕] (``gamma_task``, zeros below
+    them) and the null-space velocity's, ν_n = Y [ω_b; q̇]."""
+    g = gamma_task.copy()
     g[12:, 3:] = Y
     return g
 

@@ -20,7 +20,13 @@ import pinocchio as pin
 
 from pipeline.shapes import Q
 from pipeline.sim import task_transform as tt
-from pipeline.sim.robot_file import RobotCard, camera_frame_id, load_spec_robot, robot_card
+from pipeline.sim.robot_file import (
+    RobotCard,
+    camera_frame_id,
+    load_spec_robot,
+    robot_card,
+    robot_shape,
+)
 from pipeline.sim.sampling import Sampling, sigma_min_and_cond
 from pipeline.spec import Spec
 
@@ -81,7 +87,8 @@ class GiordanoRobot:
         self.data = self.model.createData()
         self.frame_id = camera_frame_id(self.model, spec.robot.camera_frame)
         self.mass = float(pin.computeTotalMass(self.model))
-        self.n = self.model.nv - 6
+        self.shape = robot_shape(self.model)
+        self.n = self.shape.n
         self.sampling = Sampling(spec.config_sampling)
         self.q_bar = np.asarray(spec.robot.q_bar, dtype=float)
         self.floor = spec.robot.damped_inverse.floor

@@ -162,8 +162,29 @@ REDUCED_AXES = ("bus ω_b,x", "bus ω_b,y", "bus yaw ω_b,z",
 # Their symbols alone, for axis labels.
 REDUCED_SYMBOLS = ("ω_b,x", "ω_b,y", "ω_b,z", "ν_e,x", "ν_e,y", "ν_e,z", "ω_e,x", "ω_e,y", "ω_e,z")
 BUS_YAW_AXIS = 2  # ω_b,z: the mode μ_bus = D_b/I_zz,bus of the robot card predicts (eq. 21)
-# The 3-blocks of D̆ and the spec's gains that set them (eq. 13).
-GAIN_BLOCKS = ("bus", "cam_pos", "cam_ori")
+# The blocks of D̆ and the spec's gains that set them (eqs. 13, 37f): the three task blocks of
+# three, then a redundant arm's null-space block (controller.null_space.D), the rest of v̆.
+GAIN_BLOCKS = ("bus", "cam_pos", "cam_ori", "null_space")
+TASK_BLOCKS = 3
+GAIN_FIELDS = {"bus": "controller.gains.bus.D", "cam_pos": "controller.gains.cam_pos.D",
+               "cam_ori": "controller.gains.cam_ori.D", "null_space": "controller.null_space.D"}
+
+
+def block_slices(n_breve: int) -> tuple[slice, ...]:
+    """v̆'s gain blocks for a v̆ of ``n_breve`` components (eqs. 13, 37f)."""
+    task = tuple(slice(3 * b, 3 * b + 3) for b in range(TASK_BLOCKS))
+    return task + ((slice(3 * TASK_BLOCKS, n_breve),) if n_breve > 3 * TASK_BLOCKS else ())
+
+
+def axis_name(i: int) -> str:
+    """Reduced coordinate i by name: :data:`REDUCED_AXES`, then a redundant arm's null-space
+    velocities (eq. 37)."""
+    return REDUCED_AXES[i] if i < len(REDUCED_AXES) else f"null-space ν_n,{i - 8}"
+
+
+def axis_symbol(i: int) -> str:
+    """Reduced coordinate i's symbol alone, for axis labels."""
+    return REDUCED_SYMBOLS[i] if i < len(REDUCED_SYMBOLS) else f"ν_n,{i - 8}"
 # Forward Euler on ė = −μ e is stable iff dt·μ < 2 (eq. 24). With one step of computation delay
 # (the command of step k from the state of step k − 1) it reads e⁺ = e − dt·μ·e⁻, whose
 # characteristic equation z² − z + dt·μ = 0 has its roots on the unit circle at dt·μ = 1: the
@@ -182,8 +203,8 @@ class DampingMode:
     gain sets the rate."""
 
     mu: float  # 1/s
-    vector: np.ndarray  # e (9), M̆-normalised
-    shares: np.ndarray  # (3,) the share of each gain block in μ, summing to 1
+    vector: np.ndarray  # e (9, or 9 + k for a redundant arm), M̆-normalised
+    shares: np.ndarray  # the share of each gain block in μ (block_slices), summing to 1
     axis: int  # the reduced coordinate of largest |e_i| within the dominant block
 
     @property
@@ -192,7 +213,12 @@ class DampingMode:
 
     @property
     def name(self) -> str:
-        return REDUCED_AXES[self.axis]
+        return axis_name(self.axis)
+
+    @property
+    def null_space(self) -> bool:
+        """Whether a redundant arm's null-space damping sets it (eq. 37f)."""
+        return self.block == TASK_BLOCKS
 
 
 def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]:
@@ -202,22 +228,24 @@ def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]
 
     mu, E = scipy.linalg.eigh(D_breve, M_breve)
     d = np.diag(D_breve)
+    blocks = block_slices(len(d))
     modes = []
     for i in np.argsort(mu)[::-1]:
         e = E[:, i]
         # An undamped mode (μ = 0, a block's gain at 0) has no share: it goes by ‖P_j e‖².
         per_axis = d * e**2 if mu[i] > 0 else e**2
-        shares = per_axis.reshape(3, 3).sum(axis=1) / per_axis.sum()
+        shares = np.array([per_axis[sl].sum() for sl in blocks]) / per_axis.sum()
         b = int(np.argmax(shares))
-        axis = 3 * b + int(np.argmax(np.abs(e[3 * b:3 * b + 3])))
+        axis = blocks[b].start + int(np.argmax(np.abs(e[blocks[b]])))
         modes.append(DampingMode(float(mu[i]), e, shares, axis))
     return modes
 
 
 def with_gain(D_breve: np.ndarray, block: int, d: float) -> np.ndarray:
-    """D̆ with the damping gain of block ``block`` set to d (eq. 13)."""
+    """D̆ with the damping gain of block ``block`` set to d (eqs. 13, 37f)."""
     D = D_breve.copy()
-    D[3 * block:3 * block + 3, 3 * block:3 * block + 3] = d * np.eye(3)
+    sl = block_slices(len(D))[block]
+    D[sl, sl] = d * np.eye(sl.stop - sl.start)
     return D
 
 
@@ -273,8 +301,9 @@ def mode_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float) -> ModeFixes
     """The fastest damping mode of M̆⁻¹D̆ and its fixes at step dt (eqs. 21, 24)."""
     fastest = damping_modes(M_breve, D_breve)[0]
     b = fastest.block
+    first = block_slices(len(D_breve))[b].start
     return ModeFixes(
-        fastest, dt, GAIN_BLOCKS[b], float(D_breve[3 * b, 3 * b]),
+        fastest, dt, GAIN_BLOCKS[b], float(D_breve[first, first]),
         DT_MU_STABLE / fastest.mu, DT_MU_MARGIN / fastest.mu,
         largest_stable_gain(M_breve, D_breve, b, DT_MU_STABLE / dt),
         largest_stable_gain(M_breve, D_breve, b, DT_MU_MARGIN / dt),

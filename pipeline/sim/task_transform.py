@@ -15,8 +15,18 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pipeline.shapes import TASK_DOF
+from pipeline.sim.damped_inverse import damped_pinv
 from pipeline.sim.jit import jit
-from pipeline.sim.linalg import matmul, matvec, svd
+from pipeline.sim.linalg import matmul, matvec
+from pipeline.sim.redundancy import (
+    NullSpace,
+    extended_gamma,
+    extended_gamma_dot,
+    extended_gamma_inverse,
+    null_space_map,
+    null_space_terms,
+)
 from pipeline.sim.rotations import skew
 from pipeline.sim.sampling import sigma_min_and_cond
 
@@ -79,41 +89,21 @@ def kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 
 @jit
-def damped_pinv(J, floor, damping):
-    """Damped SVD pseudo-inverse of J and its (σ_min, κ) from the same SVD (eqs. 6, 19).
-
-    J⁺ = V diag(σ_i / (σ_i² + λ²)) Uᵀ,  λ² = damping² (1 − (σ_min/floor)²) if σ_min < floor,
-    else 0: the exact inverse away from the singularity, a bounded one near it.
-    """
-    U, s, Vt = svd(J)
-    smin = s[-1]
-    lam2 = damping**2 * (1.0 - (smin / floor) ** 2) if smin < floor else 0.0
-    J_inv = matmul(np.ascontiguousarray(Vt.T) * (s / (s * s + lam2)), np.ascontiguousarray(U.T))
-    kappa = s[0] / smin if smin > 0 else np.inf
-    return J_inv, smin, kappa
-
-
-@jit
 def gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus):
     """Γ (eq. 5): ν = [v_c; ω_b; ν_e⊕] = Γ v.
 
-    Γ = [[R_tb, −R_tb [p_bc]×, R_tb J̄_v], [0, I₃, 0], [0, G_ωb, J⊕]].
+    Γ = [[R_tb, −R_tb [p_bc]×, R_tb J̄_v], [0, I₃, 0], [0, G_ωb, J⊕]]; for a redundant arm
+    (n > 6) the rows of ν_n below, zeros here, are eq. 37c's (:func:`extended_gamma`).
     """
     n = J_oplus.shape[1]
     g = np.zeros((6 + n, 6 + n))
-    task_rows_into(g, R_tb, p_bc, J_bar_v, G_wb, J_oplus)
-    return g
-
-
-@jit
-def task_rows_into(g, R_tb, p_bc, J_bar_v, G_wb, J_oplus):
-    """Γ's first twelve rows, [v_c; ω_b; ν_e⊕] (eq. 5), written into g (zeros there)."""
     g[0:3, 0:3] = R_tb
     g[0:3, 3:6] = -matmul(R_tb, skew(p_bc))
     g[0:3, 6:] = matmul(R_tb, J_bar_v)
     g[3, 3] = g[4, 4] = g[5, 5] = 1.0
     g[6:12, 3:6] = G_wb
     g[6:12, 6:] = J_oplus
+    return g
 
 
 @jit
@@ -180,23 +170,46 @@ def transformed_dynamics(M, C, gamma_inv, gamma_dot):
 
 
 @jit
+def inverse_terms(R_tb, p_bc, J_bar_v, G_wb, J_oplus, gamma_task, M, mass, floor, damping):
+    """(Γ, Γ⁻¹, null-space terms) for an arm of any n from eq. 5's rows ``gamma_task``.
+
+    Six joints: Γ as it is and its closed form of eq. 6 through the damped J⊕⁻¹; the
+    ``NullSpace`` then holds that J⊕⁻¹ as X_e with its (σ_min, κ), and empty blocks. A
+    redundant arm (n > 6): eq. 37c's Γ with the null-space rows and eq. 37d's inverse.
+    """
+    if J_oplus.shape[1] > TASK_DOF:
+        ns = null_space_terms(J_oplus, G_wb, M, mass, floor, damping)
+        return (extended_gamma(gamma_task, ns.Y),
+                extended_gamma_inverse(R_tb, p_bc, J_bar_v, ns), ns)
+    J_inv, s_min_J, kappa_J = damped_pinv(J_oplus, floor, damping)
+    ns = NullSpace(Z=np.zeros((TASK_DOF, 0)), H=np.zeros((0, 0)), Lambda_n=np.zeros((0, 0)),
+                   Y=np.zeros((0, 0)), X_w=np.zeros((0, 0)), X_e=J_inv, s_min_J=s_min_J,
+                   kappa_J=kappa_J)
+    return gamma_task, gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_inv), ns
+
+
+@jit
 def task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping):
-    """Eqs. 2–6 in one call: the kinematic terms, the damped J⊕⁻¹ with J⊕'s (σ_min, κ), Γ, Γ⁻¹."""
+    """Eqs. 2–6 (37a–d for a redundant arm) in one call: the kinematic terms, the damped J⊕⁻¹
+    (H-weighted for n > 6) with J⊕'s (σ_min, κ), Γ, Γ⁻¹."""
     p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb = kinematic_terms(R_tb, p_b, R_te, p_e, J_e,
                                                                    M, mass)
-    J_inv, s_min_J, kappa_J = damped_pinv(J_oplus, floor, damping)
     R_tb = np.ascontiguousarray(R_tb)
-    gamma = gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus)
-    gamma_inv = gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_inv)
-    return (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
-            gamma_inv)
+    gamma, gamma_inv, ns = inverse_terms(R_tb, p_bc, J_bar_v, G_wb, J_oplus,
+                                         gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus), M,
+                                         mass, floor, damping)
+    return (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, ns.X_e, ns.s_min_J, ns.kappa_J,
+            gamma, gamma_inv)
 
 
 @jit
 def gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass):
-    """Γ alone (eqs. 2–5) from the placements, J_e and M: the analysis' rebuild."""
+    """Γ alone (eqs. 2–5, 37c) from the placements, J_e and M: the analysis' rebuild."""
     p_bc, _, _, _, J_bar_v, J_oplus, G_wb = kinematic_terms(R_tb, p_b, R_te, p_e, J_e, M, mass)
-    return gamma_matrix(np.ascontiguousarray(R_tb), p_bc, J_bar_v, G_wb, J_oplus)
+    gamma = gamma_matrix(np.ascontiguousarray(R_tb), p_bc, J_bar_v, G_wb, J_oplus)
+    if J_oplus.shape[1] > TASK_DOF:
+        return extended_gamma(gamma, null_space_map(J_oplus, M, mass)[3])
+    return gamma
 
 
 @jit
@@ -209,15 +222,22 @@ def gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 @jit
 def full_transform(d, mass, floor, damping, v):
-    """Eqs. 2–9 and 19 in one call from Pinocchio's outputs ``d`` (``DynamicsInputs``) at
-    (q, v): :func:`task_transform`, then Γ̇, M̂, Ĉ and Γ's (σ_min, κ), as a ``Transform``."""
-    (p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
-     gamma_inv) = task_transform(d.R_tb, d.p_b, d.R_te, d.p_e, d.J_e, d.M, mass, floor, damping)
-    gamma_dot = gamma_time_derivative(np.ascontiguousarray(d.R_tb), d.R_te, R_eb, p_bc, p_ec,
-                                      J_bar_v, d.J_e, v, d.dJ_e, d.Ag, d.dAg, mass)
+    """Eqs. 2–9 and 19 (37 for a redundant arm) in one call from Pinocchio's outputs ``d``
+    (``DynamicsInputs``) at (q, v): :func:`task_transform`'s terms, then Γ̇, M̂, Ĉ and Γ's
+    (σ_min, κ), as a ``Transform``."""
+    p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb = kinematic_terms(d.R_tb, d.p_b, d.R_te,
+                                                                   d.p_e, d.J_e, d.M, mass)
+    R_tb = np.ascontiguousarray(d.R_tb)
+    gamma, gamma_inv, ns = inverse_terms(R_tb, p_bc, J_bar_v, G_wb, J_oplus,
+                                         gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus), d.M,
+                                         mass, floor, damping)
+    gamma_dot = gamma_time_derivative(R_tb, d.R_te, R_eb, p_bc, p_ec, J_bar_v, d.J_e, v,
+                                      d.dJ_e, d.Ag, d.dAg, mass)
+    if ns.Z.shape[1] > 0:
+        gamma_dot = extended_gamma_dot(gamma_dot, J_oplus, d.M, d.C, mass, ns)
     M_hat, C_hat = transformed_dynamics(d.M, d.C, gamma_inv, gamma_dot)
     s_min_G, kappa_G = sigma_min_and_cond(gamma)
     return Transform(p_bc=p_bc, p_c=p_c, J_bar_v=J_bar_v, J_oplus=J_oplus, G_wb=G_wb,
-                     J_oplus_inv=J_inv, s_min_J=s_min_J, kappa_J=kappa_J, gamma=gamma,
+                     J_oplus_inv=ns.X_e, s_min_J=ns.s_min_J, kappa_J=ns.kappa_J, gamma=gamma,
                      gamma_inv=gamma_inv, gamma_dot=gamma_dot, M_hat=M_hat, C_hat=C_hat,
                      s_min_G=s_min_G, kappa_G=kappa_G)

@@ -68,9 +68,10 @@ def transform_terms(model: pin.Model, fid: int, q: np.ndarray):
 
 def _gammas(q: np.ndarray):
     from pipeline.sim.redundancy import extended_gamma, extended_gamma_inverse
+    from pipeline.sim.task_transform import gamma_matrix
 
     (R_tb, p_bc, _, _, _, J_bar_v, J_oplus, G_wb), ns, M = _terms(q)
-    return (extended_gamma(R_tb, p_bc, J_bar_v, G_wb, J_oplus, ns.Y),
+    return (extended_gamma(gamma_matrix(R_tb, p_bc, J_bar_v, G_wb, J_oplus), ns.Y),
             extended_gamma_inverse(R_tb, p_bc, J_bar_v, ns), ns, M)
 
 
