@@ -25,6 +25,8 @@ from typing import NamedTuple
 
 # A task-space arm moves the camera in six degrees of freedom (eq. 3): it needs six joints.
 TASK_DOF = 6
+# The most arm joints the compiled step has places for (pipeline.sim.control_step.STEP_PLACES).
+MAX_JOINTS = 12
 # The reduced velocity v̆'s task blocks (eq. 10), three components each: the bus's angular
 # velocity and the camera's linear and angular velocity about the CoM; a redundant arm's
 # null-space velocities follow them (eq. 37).

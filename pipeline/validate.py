@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.budget import ROW_FLOATS, Budget, Estimate, check_mission
+from pipeline.budget import Budget, Estimate, check_mission
 from pipeline.shapes import Q
 from pipeline.sim.margins import dominant_root, gain_margin, loop_gain, root_regime
 from pipeline.sim.robot_file import RobotCard
@@ -32,6 +32,7 @@ class Validation:
     spec: Spec
     estimate: Estimate
     budget: Budget
+    row_floats: int  # the log row's width for this robot (pipeline/log_layout.py)
     log_bytes: int  # the log's rows before Parquet's compression (an upper bound on disk)
     card: RobotCard  # at q̄, with the spec's gains: μ_bus = D_b/I_zz,bus, μ_roll = D_o/I_roll
     modes: list[DampingMode]  # of M̆⁻¹D̆ at the start state, fastest first (eq. 21)
@@ -66,7 +67,8 @@ def validate_spec(spec_arg: str | Path, budget: Budget | None = None) -> Validat
     mission = Mission(spec)
     s0 = mission.initial_state()
     M, D, _, _ = mission.linearised_loop(s0)
-    return Validation(spec, est, budget, est.steps * ROW_FLOATS * 8, mission.robot.card(q),
+    row = mission.layout.row_size
+    return Validation(spec, est, budget, row, est.steps * row * 8, mission.robot.card(q),
                       damping_modes(M, D), mode_fixes(M, D, spec.mission.dt),
                       mission.guard_fix(s0)[1])
 
@@ -148,7 +150,7 @@ def _cost_lines(v: Validation, s: Spec, est: Estimate, m, integ: str) -> list[st
         f"{s.name}: valid spec (hash {s.spec_hash[:12]}), robot {s.robot.file}, "
         f"integrator {integ}, plant {_plant(m.plant)}",
         f"  steps:  {est.steps:,} (duration {m.duration:g} s / dt {m.dt:g} s)",
-        f"  log:    {est.steps:,} rows of {ROW_FLOATS} numbers, at most "
+        f"  log:    {est.steps:,} rows of {v.row_floats} numbers, at most "
         f"{_size(v.log_bytes)} before compression -> logs/{s.name}/run.parquet",
         f"  memory: about {_size(est.memory_bytes)} while running "
         f"(budget {_size(v.budget.memory_bytes)}, BREVE_MEMORY_BUDGET_GB)",

@@ -83,7 +83,7 @@ def peer_run(request, tmp_path_factory) -> PeerRun:
 
 @dataclass
 class Peer:
-    gamma: np.ndarray  # Γ, 12×12 (eq. 5)
+    gamma: np.ndarray  # Γ, 12×12 (eq. 5); (6 + n) square for a redundant arm (eq. 37c)
     M: np.ndarray  # joint-space inertia in Pinocchio's velocity convention (eq. 1)
     M_hat: np.ndarray  # Γ⁻ᵀ M Γ⁻¹ (eq. 8)
     M_breve: np.ndarray  # M̂[3:, 3:] (eq. 10)
@@ -94,22 +94,42 @@ class Peer:
     lever: float  # 1 + the largest |position| in the scene, m
 
 
-def mujoco_peer(mj, camera: str, q: np.ndarray, D_breve: np.ndarray) -> Peer:
-    """Γ, M, M̂, M̆ and μ at the logged q from MuJoCo alone (see the module docstring)."""
+def mujoco_peer(mj, camera: str, q: np.ndarray, D_breve: np.ndarray,
+                joints: tuple[str, ...] | None = None, locked: dict[str, float] | None = None,
+                z_ref: np.ndarray | None = None) -> Peer:
+    """Γ, M, M̂, M̆ and μ at the logged q from MuJoCo alone (see the module docstring).
+
+    ``joints``: the arm joints of the pipeline's model by name, when MuJoCo's file has more
+    (joints the spec locks, at their ``locked`` values: their dofs held still are left out of
+    M and the Jacobians). A redundant arm's null-space rows follow from their definition
+    (eq. 37): H the inertia of w = [ω_b; q̇] at a still CoM (from MuJoCo's CoM Jacobian), z
+    SciPy's null space of J⊕, its sign that of ``z_ref``, ν_n = (zᵀH_qq z)⁻¹ zᵀ H_q· w."""
     d = mujoco.MjData(mj)
     free = int(np.flatnonzero(mj.jnt_type == mujoco.mjtJoint.mjJNT_FREE)[0])
-    assert mj.jnt_qposadr[free] == 0 and mj.jnt_dofadr[free] == 0 and mj.nq == 13
-    d.qpos[:] = np.concatenate([q[:3], q[[6, 3, 4, 5]], q[7:]])  # quat (x,y,z,w) → (w,x,y,z)
+    assert mj.jnt_qposadr[free] == 0 and mj.jnt_dofadr[free] == 0
+    qpos = np.zeros(mj.nq)
+    qpos[:7] = np.concatenate([q[:3], q[[6, 3, 4, 5]]])  # quat (x,y,z,w) → (w,x,y,z)
+    if joints is None:
+        assert mj.nq == 13
+        qpos[7:] = q[7:]
+        dofs = np.arange(mj.nv)
+    else:
+        ids = [mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, name) for name in joints]
+        qpos[mj.jnt_qposadr[ids]] = q[7:]
+        for name, value in (locked or {}).items():
+            qpos[mj.jnt_qposadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, name)]] = value
+        dofs = np.r_[np.arange(6), mj.jnt_dofadr[ids]]
+    d.qpos[:] = qpos
     mujoco.mj_forward(mj, d)
     bus = mj.jnt_bodyid[free]
     R_tb = d.xmat[bus].reshape(3, 3)
-    nv = mj.nv
+    nv = len(dofs)
     T = np.eye(nv)
     T[:3, :3] = R_tb  # qvel = T v
-    M_mj = np.zeros((nv, nv))
+    M_mj = np.zeros((mj.nv, mj.nv))
     mujoco.mj_fullM(mj, d, M_mj)
-    M = T.T @ M_mj @ T
-    J_c, J_p, J_r = np.zeros((3, nv)), np.zeros((3, nv)), np.zeros((3, nv))
+    M = T.T @ M_mj[np.ix_(dofs, dofs)] @ T
+    J_c, J_p, J_r = np.zeros((3, mj.nv)), np.zeros((3, mj.nv)), np.zeros((3, mj.nv))
     mujoco.mj_jacSubtreeCom(mj, d, J_c, bus)
     site = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_SITE, camera)
     if site >= 0:
@@ -119,24 +139,41 @@ def mujoco_peer(mj, camera: str, q: np.ndarray, D_breve: np.ndarray) -> Peer:
         body = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, camera)
         mujoco.mj_jacBody(mj, d, J_p, J_r, body)
         R_te = d.xmat[body].reshape(3, 3)
+    J_c, J_p, J_r = J_c[:, dofs] @ T, J_p[:, dofs] @ T, J_r[:, dofs] @ T
     rows_b = np.hstack([np.zeros((3, 3)), np.eye(3), np.zeros((3, nv - 6))])
-    gamma = np.vstack([J_c @ T, rows_b, np.vstack([R_te.T @ (J_p - J_c), R_te.T @ J_r]) @ T])
+    gamma = np.vstack([J_c, rows_b, np.vstack([R_te.T @ (J_p - J_c), R_te.T @ J_r])])
+    J_oplus = gamma[6:12, 6:]
+    s_min_J = float(np.linalg.svd(J_oplus, compute_uv=False)[-1])
+    if nv > 12:
+        W = np.vstack([-np.linalg.solve(J_c[:, 0:3], J_c[:, 3:]), np.eye(nv - 3)])
+        H = W.T @ M @ W
+        Z = sla.null_space(J_oplus)
+        Z *= np.sign(Z.T @ z_ref)[:, 0] if z_ref is not None else 1.0
+        Lam = Z.T @ H[3:, 3:] @ Z
+        gamma = np.vstack([gamma, np.hstack([np.zeros((Z.shape[1], 3)),
+                                             np.linalg.solve(Lam, Z.T @ H[3:, :])])])
+        # The pipeline's σ_min(J⊕) of a redundant arm is its H_qq-weighted one (eq. 37d).
+        L = np.linalg.cholesky(H[3:, 3:])
+        s_min_J = float(np.linalg.svd(J_oplus @ np.linalg.inv(L).T, compute_uv=False)[-1])
     gamma_inv = np.linalg.solve(gamma, np.eye(nv))
     M_hat = gamma_inv.T @ M @ gamma_inv
     M_breve = 0.5 * (M_hat[3:, 3:] + M_hat[3:, 3:].T)
     s = np.linalg.svd(gamma, compute_uv=False)
     return Peer(gamma=gamma, M=M, M_hat=M_hat, M_breve=M_breve,
-                mu=sla.eigh(D_breve, M_breve, eigvals_only=True),
-                s_min_J=float(np.linalg.svd(gamma[6:, 6:], compute_uv=False)[-1]),
+                mu=sla.eigh(D_breve, M_breve, eigvals_only=True), s_min_J=s_min_J,
                 s_min_G=float(s[-1]), kappa_G=float(s[0] / s[-1]),
                 lever=1.0 + float(np.max(np.abs(d.xpos))))
 
 
-def d_breve(spec) -> np.ndarray:
-    """D̆ = blockdiag(d_b I₃, d_p I₃, d_o I₃) from the spec's gains (eq. 13), not derated."""
+def d_breve(spec, null_space_dim: int = 0) -> np.ndarray:
+    """D̆ = blockdiag(d_b I₃, d_p I₃, d_o I₃, d_n I_k) from the spec's gains (eqs. 13, 37f),
+    not derated."""
     g = spec.controller.gains
     assert not spec.controller.base.derate.gain
-    return np.diag(np.repeat([g.bus.D, g.cam_pos.D, g.cam_ori.D], 3))
+    d = np.repeat([g.bus.D, g.cam_pos.D, g.cam_ori.D], 3)
+    if null_space_dim:
+        d = np.r_[d, [spec.controller.null_space.D] * null_space_dim]
+    return np.diag(d)
 
 
 def _peers(run: PeerRun, steps) -> dict[int, Peer]:
@@ -224,3 +261,41 @@ def test_the_peer_sees_the_old_seed_camera(monkeypatch):
     assert np.max(np.abs(T.reduced_inertia - p.M_breve)) > 0.5 * np.max(np.abs(p.M_breve))
     M = np.triu(T.M) + np.triu(T.M, 1).T
     np.testing.assert_allclose(M, p.M, rtol=0, atol=1e-12)  # the bodies agree: M does
+
+
+def test_the_redundant_servicer_matches_mujoco(tmp_path):
+    """The 7-DoF servicer (issue 34): at logged steps of a short mission, Γ rebuilt by the
+    analysis' kernel (eq. 37c, its null-space row included), M̆ from the robot's terms, the
+    logged σ_min of the weighted J⊕ and dt·μ_max (the null-space mode among them) against the
+    peer, which also finds M̂ block diagonal (the null-space velocity dynamically consistent,
+    eq. 37d) from MuJoCo's own inertia."""
+    spec = load_spec("short_panda_nominal")
+    path = run_spec(spec, tmp_path).path
+    robot = GiordanoRobot(spec)
+    cols = read_columns(path, ["q", "v", "s_min_J", "dt_mu_max"])
+    steps = np.linspace(0, len(cols["q"]) - 1, 5).astype(int)
+    mj = mujoco_model(spec.robot_path)
+    D = d_breve(spec, robot.shape.null_space_dim)
+    gammas = rebuild_gamma(robot, cols["q"][steps])
+    for k, G in zip(steps, gammas, strict=True):
+        T = robot.terms(cols["q"][k], cols["v"][k])
+        assert cols["s_min_J"][k] >= robot.floor, k  # the inverse is exact: comparable
+        p = mujoco_peer(mj, spec.robot.camera_frame, cols["q"][k], D, robot.shape.joints,
+                        spec.robot.locked_joints, z_ref=T.gamma_inv[6:, 12:])
+        assert p.gamma.shape == (13, 13)
+        tol = ULPS * EPS * np.max(np.abs(p.gamma)) * p.lever
+        np.testing.assert_allclose(G, p.gamma, rtol=0, atol=tol, err_msg=f"step {k}")
+        rel = ULPS * EPS * p.kappa_G * p.lever
+        scale = np.max(np.abs(p.M_breve))
+        np.testing.assert_allclose(p.M_breve[:9, 9:], 0.0, rtol=0, atol=rel * scale)
+        np.testing.assert_allclose(T.reduced_inertia, p.M_breve, rtol=0, atol=rel * scale,
+                                   err_msg=f"step {k}")
+        assert abs(cols["s_min_J"][k] - p.s_min_J) <= 12 * tol, k
+        assert abs(cols["dt_mu_max"][k] / (spec.mission.dt * p.mu[-1]) - 1) <= rel, k
+        # The block check can fail: the plain null-space speed ν_n = z̃ᵀq̇ (not weighted by
+        # the inertia) couples the null space to the task in M̂.
+        plain = p.gamma.copy()
+        plain[12] = np.r_[np.zeros(6), T.gamma_inv[6:, 12]]
+        plain_inv = np.linalg.inv(plain)
+        cross = (plain_inv.T @ p.M @ plain_inv)[3:12, 12]
+        assert np.max(np.abs(cross)) > 1e3 * rel * scale, k

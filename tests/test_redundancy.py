@@ -97,10 +97,12 @@ def test_the_collections_xarm7_self_motion():
     assert np.abs(twist).max() < 1e-12 and np.linalg.norm(v[6:]) == pytest.approx(0.5)
 
 
-def test_the_stages_refuse_a_redundant_arm_naming_the_lock():
+def test_the_stages_refuse_a_redundant_arm_without_its_null_space_impedance():
     spec = with_overrides(load_spec("nominal"), {
         "robot.file": str(SHIPPED_SPECS / "robots" / "servicer_panda.urdf"),
         "robot.locked_joints": {"panda_finger_joint1": 0.0, "panda_finger_joint2": 0.0},
         "robot.q_bar": [0.0] * 7})
-    with pytest.raises(SpecError, match=r"7 arm joints .*lock 1 in robot\.locked_joints"):
+    with pytest.raises(SpecError, match=r"field controller\.null_space: 7 arm joints .*give "
+                                        r"their impedance .*or lock 1 joint in "
+                                        r"robot\.locked_joints"):
         load_spec_robot(spec)

@@ -104,6 +104,21 @@ def require_provenance(path, prov: rs.Provenance) -> None:
                           f"(tolerance {PROVENANCE_TOL:g})")
 
 
+def analysis_robot(log: VerifiedLog) -> GiordanoRobot:
+    """The robot a log was run with, for the analysis' stages: an arm of six joints. A
+    redundant arm's log (eq. 37) is refused: its simulation is built, but not yet the
+    analysis of its null-space directions, modes and map (stage 4 and eq. 34 at n > 6)."""
+    robot = GiordanoRobot(log.spec)
+    shape = robot.shape
+    if shape.null_space_dim:
+        raise LogError(f"{log.path}: a redundant arm's log ({shape.n} joints, "
+                       f"{shape.null_space_dim} null-space velocit"
+                       f"{'y' if shape.null_space_dim == 1 else 'ies'}): its analysis is not "
+                       "built yet; the log reads as a labelled table "
+                       "(pipeline.store.table.read_log_table)")
+    return robot
+
+
 def analyze_log(log: VerifiedLog, window_start: float | None = None,
                 check: bool = True) -> rs.AnalysisRecord:
     """All single-log stages; returns the analysis record (the content of analysis.json).
@@ -121,7 +136,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     n = log.rows
     dt = spec.mission.dt
     win = choose_window(n, dt, window_start, str(path))
-    robot = GiordanoRobot(spec)
+    robot = analysis_robot(log)
 
     prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check)
 
@@ -231,7 +246,7 @@ def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
     path, meta, spec = log.path, log.meta, log.spec
     log.require(REQUIRED)
     n = log.rows
-    robot = GiordanoRobot(spec)
+    robot = analysis_robot(log)
     prov, _, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
     require_provenance(path, prov)
     cols = log.columns(["v_breve", *LIMIT_FLAGS])

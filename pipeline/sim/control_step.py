@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.log_layout import row_fields
-from pipeline.shapes import TASK_DOF, TASK_ERROR_SIZE, Q, RobotShape
+from pipeline.shapes import MAX_JOINTS, TASK_DOF, TASK_ERROR_SIZE, Q, RobotShape
 from pipeline.sim import breve_controller as bc
 from pipeline.sim.base_guidance import read_reference
 from pipeline.sim.com_controller import com_update
@@ -117,7 +117,6 @@ def step_layout(shape: RobotShape) -> StepLayout:
 # constant: the kernel takes the arm's index in it (``StepLayout.index``). Handed in from
 # Python at each call, the places themselves (fifty-odd slices) cost Numba ~110 µs a call to
 # type and unbox, half a step; an index costs nothing.
-MAX_JOINTS = 12
 STEP_PLACES = tuple(
     step_layout(RobotShape(tuple(f"joint{i}" for i in range(n)))).places
     for n in range(TASK_DOF, MAX_JOINTS + 1))

@@ -53,7 +53,8 @@ from pipeline.sim.stability import (
     bisect_critical_step,
     critical_step,
     damping_modes,
-    posture_stiffness,
+    loop_stiffness,
+    position_jacobian,
 )
 from pipeline.sim.target import CoverageCounter, build_target
 from pipeline.spec import Spec
@@ -159,13 +160,17 @@ class Mission:
 
     def linearised_loop(self, s: LoopState) -> tuple[np.ndarray, ...]:
         """(M̆, D̆, K_x, J_x) at state ``s``: the reduced inertia, the damping gains after the γ
-        derate, the stiffness in x̃ coordinates and the task Jacobian (eqs. 13, 21, 22)."""
-        robot, ctrl = self.robot, self.spec.controller
+        derate, the stiffness in the map's position coordinates (x̃, and a redundant arm's
+        null-space η) and their rate per v̆ (eqs. 13, 21, 22, 37f)."""
+        robot, ctrl, shape = self.robot, self.spec.controller, self.robot.shape
         T = robot.terms(s.q, s.v)
         gamma = conditioning_scale(T.s_min_G, ctrl)
-        J_x = task_errors(T, self.guidance.reference(s.tau, T.p_b), gamma, s.v_c).J_x
-        K, D = block_gains(ctrl, gamma)
-        K_x = J_x.T @ K + posture_stiffness(T.gamma_inv, ctrl.gains.posture, J_x)
+        J_x = position_jacobian(
+            task_errors(T, self.guidance.reference(s.tau, T.p_b), gamma, s.v_c).J_x,
+            shape.n_breve)
+        K, D = block_gains(ctrl, gamma, shape.null_space_dim)
+        K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl.gains.posture,
+                             0.0 if ctrl.null_space is None else ctrl.null_space.K)
         return np.asarray(T.reduced_inertia), D, K_x, J_x
 
     def controller_vector(self) -> np.ndarray:

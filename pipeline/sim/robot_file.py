@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
-from pipeline.shapes import TASK_DOF, RobotShape
+from pipeline.shapes import MAX_JOINTS, TASK_DOF, RobotShape
 from pipeline.sim.robot_crosscheck import crosscheck_robot_file
 from pipeline.spec import Spec
 
@@ -244,18 +244,28 @@ def robot_shape(model: pin.Model) -> RobotShape:
 
 def load_spec_robot(spec: Spec) -> pin.Model:
     """The model of a spec's robot block: :func:`load_robot_model` with its file, camera frame,
-    bus inertia scale, package folders and locked joints, for the stages: six arm joints (the
-    loop of eqs. 12–16 is theirs), and ``robot.q_bar`` one angle per arm joint."""
+    bus inertia scale, package folders and locked joints, for the stages: 6 to ``MAX_JOINTS``
+    arm joints, a redundant arm's with its null-space impedance (eq. 37f), and ``robot.q_bar``
+    one angle per arm joint."""
     model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
                              spec.robot.bus_inertia_scale, spec.package_dirs,
                              spec.robot.locked_joints)
     shape = robot_shape(model)
-    if shape.n > TASK_DOF:
+    if shape.n > MAX_JOINTS:
         raise SpecError(f"{spec.robot_path}: {shape.n} arm joints ({', '.join(shape.joints)}): "
-                        f"the loop runs {TASK_DOF}-joint arms; a redundant arm's null-space "
-                        f"terms exist (eq. 37) but not its loop yet: lock "
-                        f"{shape.n - TASK_DOF} in robot.locked_joints to run it with "
-                        f"{TASK_DOF}")
+                        f"the loop runs arms of {TASK_DOF} to {MAX_JOINTS} joints; lock "
+                        f"{shape.n - MAX_JOINTS} in robot.locked_joints")
+    k = shape.null_space_dim
+    if k and spec.controller.null_space is None:
+        raise SpecError(f"spec {spec.name}: field controller.null_space: {shape.n} arm joints "
+                        f"({', '.join(shape.joints)}) leave {k} null-space velocit"
+                        f"{'y' if k == 1 else 'ies'} (eq. 37); give their impedance "
+                        "(controller.null_space: {K: …, D: …}), or lock "
+                        f"{k} joint{'s' if k > 1 else ''} in robot.locked_joints")
+    if not k and spec.controller.null_space is not None:
+        raise SpecError(f"spec {spec.name}: field controller.null_space: the {shape.n} arm "
+                        f"joints of {spec.robot_path.name} leave no null space (eq. 37 is a "
+                        f"redundant arm's, more than {TASK_DOF} joints)")
     if len(spec.robot.q_bar) != shape.n:
         raise SpecError(f"spec {spec.name}: field robot.q_bar: {len(spec.robot.q_bar)} joint "
                         f"angles for the {shape.n} arm joints of {spec.robot_path.name} "

@@ -152,6 +152,33 @@ def posture_stiffness(gamma_inv: np.ndarray, k_posture: float, J_x: np.ndarray) 
     return k_posture * P.T @ P @ np.linalg.inv(J_x)
 
 
+def position_jacobian(J_x: np.ndarray, n_breve: int) -> np.ndarray:
+    """The map's position rate per v̆ (eqs. 22, 37f): J_x of the task error x̃ (9×9), and for a
+    redundant arm the null-space coordinates η with η̇ = ν_n below it, blockdiag(J_x, I_k)."""
+    if n_breve == J_x.shape[0]:
+        return J_x
+    out = np.eye(n_breve)
+    out[:J_x.shape[0], :J_x.shape[1]] = J_x
+    return out
+
+
+def loop_stiffness(J_x: np.ndarray, K_breve: np.ndarray, gamma_inv: np.ndarray,
+                   k_posture: float, k_null: float = 0.0) -> np.ndarray:
+    """K_x, the stiffness in the map's position coordinates (eqs. 13, 22, 37f): J_xᵀK̆ on the
+    task error, the posture spring, and a redundant arm's null-space spring K_n Z̃ᵀ(q − q̄) in
+    ν_n's rows; ``J_x`` from :func:`position_jacobian` (q − q̄ moves by Γ⁻¹[6:, 3:] per unit of
+    the coordinates v̆ integrates)."""
+    n, task = J_x.shape[0], K_breve.shape[0]
+    if n == task:
+        return J_x.T @ K_breve + posture_stiffness(gamma_inv, k_posture, J_x)
+    P = gamma_inv[6:, 3:]
+    S = k_posture * P.T @ P
+    S[task:] += k_null * gamma_inv[6:, 12:].T @ P
+    K_x = S @ np.linalg.inv(J_x)
+    K_x[:task, :task] += J_x[:task, :task].T @ K_breve
+    return K_x
+
+
 # -- The damping modes and their fixes (eqs. 21, 24) -----------------------------------------
 
 # The nine reduced coordinates v̆ = [ω_b ; ν_e,lin ; ν_e,ang] (eq. 2): ω_b in the bus frame (z
