@@ -36,7 +36,7 @@ from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.stability import mode_fixes
+from pipeline.sim.stability import mode_fixes, mode_stiffness
 from pipeline.spec import Spec
 
 IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J"]
@@ -89,7 +89,8 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
         damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
         prediction = judge(damping.modes, np.asarray(damping.M_breve), nu_breve, dt,
-                           damping.delay_steps, controller.controller.limits, None)
+                           damping.delay_steps, controller.controller.limits, None,
+                           controller.controller.null_space)
     imp = log.meta.imported
     return rs.ImportedRecord(
         spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,
@@ -147,7 +148,8 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
     row = log.columns(["q", "v"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, controller.controller)
-    K, D = block_gains(controller.controller, gamma)
+    ctrl, shape = controller.controller, robot.shape
+    K, D = block_gains(ctrl, gamma, shape.null_space_dim)
     M_b = T.reduced_inertia
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)
     dt, integ = log.spec.mission.dt, controller.controller.integrator
@@ -160,7 +162,7 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
         fastest_mode=fastest_mode_record(mode_fixes(M_b, D, dt)),
         plant=controller.mission.plant.model, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req, K),
+        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape)),
         M_breve=M_b.tolist(), D_breve=D.tolist())
 
 

@@ -85,6 +85,9 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     there (eq. 34): the spec's integrator, plant and delay. w = [x̃; e] (18), and with one step
     of delay the velocity increment the held command carries (27)."""
     mission = Mission(spec)
+    if mission.robot.shape.null_space_dim:
+        raise ValueError(f"{spec.name}: the finite-difference map is built for six-joint arms "
+                         "(a redundant arm's null-space coordinate η has no state to perturb)")
     q0 = mission.q0.copy()
     mission.guidance = StaticGuidance(_rest_reference(mission, q0))
     mission.robot.q_bar = q0[Q.joints].copy()  # the posture spring is at rest too

@@ -22,7 +22,7 @@ from pipeline.analysis.harm import harm, roll_smear
 from pipeline.analysis.schema import value_at
 from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import CheckFailed, LogError, SpecError
-from pipeline.log_layout import LIMIT_FLAGS
+from pipeline.log_layout import LIMIT_FLAGS, limit_flags
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
 from pipeline.shapes import V
@@ -30,7 +30,15 @@ from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.margins import period_steps, requirement_fixes, root_regime
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.stability import BUS_YAW_AXIS, ModeFixes, damping_modes, mode_fixes
+from pipeline.sim.stability import (
+    BUS_YAW_AXIS,
+    ModeFixes,
+    damping_modes,
+    loop_stiffness,
+    mode_fixes,
+    mode_stiffness,
+    position_jacobian,
+)
 from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
@@ -108,15 +116,7 @@ def analysis_robot(log: VerifiedLog) -> GiordanoRobot:
     """The robot a log was run with, for the analysis' stages: an arm of six joints. A
     redundant arm's log (eq. 37) is refused: its simulation is built, but not yet the
     analysis of its null-space directions, modes and map (stage 4 and eq. 34 at n > 6)."""
-    robot = GiordanoRobot(log.spec)
-    shape = robot.shape
-    if shape.null_space_dim:
-        raise LogError(f"{log.path}: a redundant arm's log ({shape.n} joints, "
-                       f"{shape.null_space_dim} null-space velocit"
-                       f"{'y' if shape.null_space_dim == 1 else 'ies'}): its analysis is not "
-                       "built yet; the log reads as a labelled table "
-                       "(pipeline.store.table.read_log_table)")
-    return robot
+    return GiordanoRobot(log.spec)
 
 
 def analyze_log(log: VerifiedLog, window_start: float | None = None,
@@ -141,8 +141,9 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check)
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
-    cols = log.columns([c for c in REQUIRED if c not in ("x_tilde", "kappa_G")],
-                       win.start, win.stop)
+    flags = limit_flags(robot.shape)
+    cols = log.columns([*(c for c in REQUIRED if c not in ("x_tilde", "kappa_G", *flags)),
+                        *flags], win.start, win.stop)
     rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
     th = theory_at_step(robot, spec, log, win.start + rep.index)
     at_rep = replace(th.record, rule=rep.rule, window_steps_below_floor=rep.below_floor,
@@ -166,13 +167,13 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
                                       max=float(np.max(jumps))),
         bus_rate=bus_rate_statistics(cols["v"][:, V.omega_b], dt,
                                      spec.controller.limits.omega_b_acc),
-        metrics=mission_metrics(cols),
+        metrics=mission_metrics(cols, flags),
         harm=harm(cols["u_applied"], cols["v"], cols["q"], cols["attitude_excursion_deg"], dt),
         camera_roll=roll_smear(nu_breve[:, 8], dt, spec.camera.resolution_px,
                                spec.camera.fov_deg),
         prediction=judge(th.record.modes, np.asarray(th.record.M_breve), nu_breve, dt,
                          th.record.delay_steps, spec.controller.limits,
-                         th.record.spectral_radius),
+                         th.record.spectral_radius, spec.controller.null_space),
         versions=meta.versions,
         robot=card,
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
@@ -249,9 +250,10 @@ def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
     robot = analysis_robot(log)
     prov, _, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
     require_provenance(path, prov)
-    cols = log.columns(["v_breve", *LIMIT_FLAGS])
+    flags = limit_flags(robot.shape)
+    cols = log.columns(["v_breve", *flags])
     bound = np.zeros(n, dtype=bool)
-    for f in LIMIT_FLAGS:
+    for f in flags:
         bound |= cols[f]
     first = int(np.argmax(bound)) if bound.any() else n - 1
     w_b = cols["v_breve"][: first + 1, 0:3]
@@ -354,10 +356,12 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     row = log.columns(["q", "v", "x_tilde", "s_min_G"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, spec.controller)
-    K, D = block_gains(spec.controller, gamma)
+    ctrl, shape = spec.controller, robot.shape
+    K, D = block_gains(ctrl, gamma, shape.null_space_dim)
     M_b = T.reduced_inertia
-    J_x = theory.task_jacobian(row["x_tilde"][0], T.R_te)
-    K_x = J_x.T @ K + theory.posture_stiffness(T.gamma_inv, spec.controller.gains.posture, J_x)
+    J_x = position_jacobian(theory.task_jacobian(row["x_tilde"][0], T.R_te), shape.n_breve)
+    K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl.gains.posture,
+                         0.0 if ctrl.null_space is None else ctrl.null_space.K)
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)  # the step kernel's layout
     dt, integ = spec.mission.dt, spec.controller.integrator
     plant, delay = spec.mission.plant.model, spec.mission.plant.delay_steps
@@ -367,7 +371,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     # The same integrator under the note's fully explicit update order (eq. 22): the order
     # the seed note's published eigenvalue matches; no loop flies it.
     note_map = theory.spectrum(theory.discrete_map(M_b, D, K_x, J_x, dt, integ, "note"))
-    e = own.dominant_vector[9:18]
+    e = own.dominant_vector[shape.n_breve:2 * shape.n_breve]
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
@@ -394,7 +398,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
         fastest_mode=fastest_mode_record(fixes),
         integrator=integ, dt=dt, plant=plant, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req, K),
+        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape)),
         requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req),
         M_breve=M_b.tolist(), D_breve=D.tolist(), K_breve=K.tolist(),
         J_x=J_x.tolist(), K_x=K_x.tolist(),
@@ -480,7 +484,7 @@ def fastest_modes_along(robot: GiordanoRobot, spec: Spec, log: VerifiedLog,
     names, dt_mus = [], []
     for k in steps:
         T = robot.terms(c["q"][k], c["v"][k])
-        _, D = block_gains(spec.controller, float(c["gamma"][k]))
+        _, D = block_gains(spec.controller, float(c["gamma"][k]), robot.shape.null_space_dim)
         fastest = damping_modes(T.reduced_inertia, D)[0]
         names.append(fastest.name)
         dt_mus.append(dt * fastest.mu)
@@ -492,14 +496,16 @@ def fastest_modes_along(robot: GiordanoRobot, spec: Spec, log: VerifiedLog,
         name_at_max=names[worst], dt_mu_min=float(min(dt_mus)))
 
 
-def mission_metrics(cols: dict[str, np.ndarray]) -> rs.Metrics:
-    """Window metrics: pointing and boresight errors, coverage, and how often each limit bound."""
+def mission_metrics(cols: dict[str, np.ndarray], flags: tuple[str, ...] = LIMIT_FLAGS
+                    ) -> rs.Metrics:
+    """Window metrics: pointing and boresight errors, coverage, and how often each limit
+    (``flags``, the log's) bound."""
     return rs.Metrics(
         pointing_err_deg_max=float(cols["pointing_err_deg"].max()),
         boresight_err_deg_max=float(cols["boresight_err_deg"].max()),
         coverage_final=float(cols["coverage"][-1]),
         dt_mu_max_window_max=float(cols["dt_mu_max"].max()),
-        limit_share={f: float(cols[f].mean()) for f in LIMIT_FLAGS},
+        limit_share={f: float(cols[f].mean()) for f in flags},
     )
 
 

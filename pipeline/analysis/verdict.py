@@ -42,11 +42,17 @@ import numpy as np
 
 from pipeline.analysis.ringing import MOST, Ring, ring
 from pipeline.sim import margins as mg
-from pipeline.sim.stability import GAIN_BLOCKS, REDUCED_SYMBOLS, damping_modes
+from pipeline.sim.stability import (
+    GAIN_BLOCKS,
+    REDUCED_SYMBOLS,
+    axis_symbol,
+    block_slices,
+    damping_modes,
+)
 
 # The limit names of each gain block's 3-block of ν̆ (eq. 16), and its units.
-BLOCK_LIMITS = ("omega_b", "nu_e_lin", "nu_e_ang")
-BLOCK_UNITS = ("rad/s", "m/s", "rad/s")
+BLOCK_LIMITS = ("omega_b", "nu_e_lin", "nu_e_ang", "null_space")
+BLOCK_UNITS = ("rad/s", "m/s", "rad/s", "rad/s")
 AT_BOUND_REL = 0.01  # a step or a rate within 1 % of its bound is at the bound (as eq. 16's C16)
 SAME_PERIOD = 0.05  # relative: two rings of one period (the periodogram's peaks)
 HELD_SIZE = 0.10  # relative: a relay cycle's size as its describing function estimates it
@@ -88,7 +94,7 @@ def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: 
         wn = (float(np.sqrt(max(m.vector @ K_breve @ m.vector, 0.0)))
               if K_breve is not None else 0.0)
         out.append(ModeLoop(
-            name=m.name, symbol=REDUCED_SYMBOLS[m.axis], axis=m.axis,
+            name=m.name, symbol=axis_symbol(m.axis), axis=m.axis,
             gain_block=GAIN_BLOCKS[m.block],
             share=float(m.shares[m.block]), mu=m.mu, dt_mu=dt * m.mu, omega_n=wn,
             damping_ratio=m.mu / (2 * wn) if wn > 0 else None, loop_gain=g,
@@ -185,27 +191,31 @@ def held_by(nu_block: np.ndarray, delay: int, dt: float, limits, measured: Ring
 
 
 def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: float,
-          delay: int, limits, map_radius: float | None) -> Prediction:
+          delay: int, limits, map_radius: float | None, null_space=None) -> Prediction:
     """Each mode of ``modes`` against its modal coordinate in ``nu_breve`` (the window's ν̆,
     N×9) (eq. 36), on a loop of ``delay`` steps of delay. ``limits``: the controller's
-    ``limits`` block; ``map_radius``: the spectral radius of the loop's map (eq. 34), None
+    ``limits`` block (and ``null_space``, a redundant arm's ``controller.null_space``: its
+    block's bounds); ``map_radius``: the spectral radius of the loop's map (eq. 34), None
     where it cannot be built (an imported log has no x̃)."""
+    blocks = block_slices(nu_breve.shape[1])
     rings = []
     for m in modes:
         w = np.asarray(m.vector)
         eta = nu_breve @ (M_breve @ w)
-        rings.append((ring(eta, m.name, BLOCK_UNITS[m.axis // 3], scale=w[m.axis]),
+        b = next(i for i, sl in enumerate(blocks) if sl.start <= m.axis < sl.stop)
+        rings.append((ring(eta, m.name, BLOCK_UNITS[b], scale=w[m.axis]),
                       ring(eta, m.name, "√(kg·m²)·rad/s")))
     judged = []
     for m, (measured, modal) in zip(modes, rings, strict=True):
-        b = m.axis // 3
+        b = next(i for i, sl in enumerate(blocks) if sl.start <= m.axis < sl.stop)
         name = BLOCK_LIMITS[b]
-        bounds = (name, getattr(limits, f"{name}_acc"), getattr(limits, f"{name}_rate"))
+        bounds = ((name, null_space.acc, null_space.rate) if name == "null_space" else
+                  (name, getattr(limits, f"{name}_acc"), getattr(limits, f"{name}_rate")))
         driver = (None if m.rings or not measured.rings else
                   _driver(measured, modal, [(o, r) for o, r in zip(modes, rings, strict=True)
                                             if o.rings]))
         # A driven ring's block is at its bound through its driver's cycle, not its own.
-        held = (held_by(nu_breve[:, 3 * b:3 * b + 3], delay, dt, bounds, measured)
+        held = (held_by(nu_breve[:, blocks[b]], delay, dt, bounds, measured)
                 if measured.rings and driver is None else None)
         # A stable mode's ring that fades over the window is its transient, what a stable
         # root does (eq. 36's trend); an unstable one's must ring, whatever its trend.

@@ -25,7 +25,7 @@ from pipeline.errors import LogError
 from pipeline.logs import VerifiedLog
 from pipeline.shapes import BREVE
 from pipeline.sim.sampling import scale_by_svd
-from pipeline.sim.stability import REDUCED_SYMBOLS
+from pipeline.sim.stability import axis_symbol
 
 # Legends at 8 pt at least: at the page's width a 6–7 pt legend is unreadable.
 plt.rcParams.update({"figure.dpi": 100, "font.size": 9, "legend.fontsize": 8,
@@ -689,7 +689,7 @@ def startup_growth(run: RunData, against: VerifiedLog, path: Path,
         k = np.arange(k0, min(len(alt), k0 + 12))
         a2.semilogy(t[k], alt[k0] * lam ** (k - k0), "k--", lw=0.9,
                     label=f"|λ_dom|^k = {lam:.3g}^k (Φ's dominant eigenvalue)")
-    a1.set(ylabel=f"{REDUCED_SYMBOLS[axis]} (rad/s)",
+    a1.set(ylabel=f"{axis_symbol(axis)} (rad/s)",
            title=label(f"{name} over the first half-second"))
     a2.set(xlabel="t (s)", ylabel="alternating part (rad/s)", ylim=(1e-8, 1.0))
     a1.legend(loc="upper left")
@@ -715,7 +715,7 @@ def mode_psd(run: RunData, against: VerifiedLog, path: Path,
         ax.loglog(f[1:], np.maximum(p[1:], 1e-30), "-", lw=1.0, color=color, label=label_)
         ax.axvline(0.5 / dt, color=color, ls="--", lw=0.9,
                    label=f"Nyquist of {label_}: 1/(2·{dt:g} s) = {0.5 / dt:.3g} Hz")
-    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {REDUCED_SYMBOLS[axis]} (rad²/s²/Hz)",
+    ax.set(xlabel="frequency (Hz)", ylabel=f"PSD of {axis_symbol(axis)} (rad²/s²/Hz)",
            title=label(f"{name} over the window: power spectral density"))
     ax.legend(loc="lower left")
     _save(fig, path)

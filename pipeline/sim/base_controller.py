@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.errors import SpecError
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.spec import Controller
 
@@ -28,7 +29,8 @@ def block_gains(ctrl: Controller, gamma: float, null_space_dim: int = 0
     d = np.repeat([g.bus.D * scale, g.cam_pos.D, g.cam_ori.D], 3)
     if null_space_dim:
         if ctrl.null_space is None:
-            raise ValueError("controller.null_space: a redundant arm needs its null-space "
-                             "damping")
+            raise SpecError(f"field controller.null_space: a redundant arm's "
+                            f"{null_space_dim} null-space velocities need their damping "
+                            "(eq. 37f)")
         d = np.concatenate([d, np.full(null_space_dim, ctrl.null_space.D)])
     return np.diag(k), np.diag(d)

@@ -162,6 +162,18 @@ def position_jacobian(J_x: np.ndarray, n_breve: int) -> np.ndarray:
     return out
 
 
+def mode_stiffness(K_breve: np.ndarray, ctrl, shape) -> np.ndarray:
+    """The block stiffness on v̆'s coordinates for the modes' undamped frequencies (eqs. 13,
+    37f): K̆ on the task blocks and a redundant arm's null-space stiffness K_n on ν_n's."""
+    k = shape.null_space_dim
+    if not k:
+        return K_breve
+    out = np.zeros((shape.n_breve, shape.n_breve))
+    out[:K_breve.shape[0], :K_breve.shape[1]] = K_breve
+    out[K_breve.shape[0]:, K_breve.shape[1]:] = ctrl.null_space.K * np.eye(k)
+    return out
+
+
 def loop_stiffness(J_x: np.ndarray, K_breve: np.ndarray, gamma_inv: np.ndarray,
                    k_posture: float, k_null: float = 0.0) -> np.ndarray:
     """K_x, the stiffness in the map's position coordinates (eqs. 13, 22, 37f): J_xᵀK̆ on the
