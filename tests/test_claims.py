@@ -352,7 +352,10 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "svc_fix_gains": "servicer_sampled_gains",
         "svc_fix_delay_imex": "servicer_sampled_delay_imex",
         "svc_fix_delay_dt": "servicer_sampled_delay_dt005",
-        "svc_fix_delay_gains": "servicer_sampled_delay_gains"}
+        "svc_fix_delay_gains": "servicer_sampled_delay_gains",
+        # The redundant servicer's, 60 s of a few seconds each.
+        "panda": "panda_nominal", "panda_dt015": "panda_dt015",
+        "panda_null": "panda_null_ringing"}
     assert {n: r.expect for n, r in ci.runs.items()} == {n: r.expect
                                                         for n, r in full.runs.items()}
     assert {n: r.against for n, r in ci.runs.items()} == {n: r.against
@@ -469,3 +472,17 @@ def test_an_unknown_kind_is_a_one_line_error(tmp_path):
     with pytest.raises(SpecError) as e:
         load_claims(path)
     assert "kind" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_null_space_metric_on_a_six_joint_log_is_refused(tmp_path):
+    """log.null_space (a redundant arm's ν_n, eq. 37) on the seed robot's log: one error line
+    naming the metric and the log, exit 2, not an empty statistic."""
+    built()
+    path = claims_file(tmp_path, [
+        {"id": "N1", "statement": "quiet null space", "expect": "hold", "checks": [
+            {"metric": "nominal:log.null_space.ripple", "op": "lt", "threshold": 1e-4}]}])
+    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    errors = [ln for ln in r.stderr.strip().splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "metric log.null_space.ripple" in errors[0], r.stderr
+    assert "has no null_space components" in errors[0]

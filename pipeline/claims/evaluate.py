@@ -50,6 +50,9 @@ def log_statistic(run: StoredRun, start: int, group: str, stat: str) -> float:
     Δx; rms; lag1_min / lag1_max: the extreme lag-1 autocorrelations (eq. 25) of the components.
     """
     x = run.log.columns(["v_breve"], start)["v_breve"][:, LOG_GROUPS[group]]
+    if x.shape[1] == 0:
+        raise SpecError(f"metric log.{group}.{stat}: the log {run.log.path} has no {group} "
+                        "components (a six-joint arm has no null space)")
     if stat == "ripple":
         return float(np.max(np.sqrt(np.mean(np.diff(x, 2, axis=0) ** 2, axis=0)) / 4))
     if stat == "step_rms":

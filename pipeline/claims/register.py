@@ -58,8 +58,9 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
 CLAIMS_SCHEMA = "breve-claims/2"  # the version of the claims.json the register writes
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
 FIXED_SOURCES = ("cross_check", "baselines", "sweep", "note")
+# v_breve is its task part; null_space a redundant arm's null-space velocities (eq. 37).
 LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
-              "camera_roll": slice(8, 9), "v_breve": slice(0, 9)}
+              "camera_roll": slice(8, 9), "v_breve": slice(0, 9), "null_space": slice(9, None)}
 LOG_STATS = ("ripple", "step_rms", "lag1_min", "lag1_max", "rms")
 
 
