@@ -17,8 +17,9 @@ from pipeline.errors import SpecError
 from pipeline.paths import SHIPPED_SPECS
 from pipeline.sim import redundancy as rd
 from pipeline.sim.linalg import determinant
+from pipeline.sim.mission import Mission
 from pipeline.sim.robot import GiordanoRobot
-from pipeline.sim.robot_file import camera_frame_id, load_robot_model, load_spec_robot
+from pipeline.sim.robot_file import camera_frame_id, load_robot_model
 from pipeline.sim.task_transform import gamma_inverse, gamma_matrix, kinematic_terms
 from pipeline.spec import load_spec, with_overrides
 from pipeline.verify.checks_base import draw_state
@@ -105,4 +106,4 @@ def test_the_stages_refuse_a_redundant_arm_without_its_null_space_impedance():
     with pytest.raises(SpecError, match=r"field controller\.null_space: 7 arm joints .*give "
                                         r"their impedance .*or lock 1 joint in "
                                         r"robot\.locked_joints"):
-        load_spec_robot(spec)
+        Mission(spec)

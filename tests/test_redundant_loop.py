@@ -125,11 +125,11 @@ def test_the_null_space_impedance_is_required_for_seven_joints_and_refused_for_s
         update={"null_space": None})})
     with pytest.raises(SpecError, match=r"field controller\.null_space: 7 arm joints .* leave "
                                         r"1 null-space velocity"):
-        GiordanoRobot(no_null)
+        Mission(no_null)
     six = with_overrides(load_spec("nominal"), {"controller.null_space": {"D": 1.0}})
     with pytest.raises(SpecError, match=r"field controller\.null_space: the 6 arm joints .* "
                                         r"leave no null space"):
-        GiordanoRobot(six)
+        Mission(six)
 
 
 def test_the_analysis_verdict_on_the_rippling_panda(tmp_path):
@@ -150,3 +150,34 @@ def test_the_analysis_verdict_on_the_rippling_panda(tmp_path):
     null = judged["null-space ν_n,1"]
     assert not null["predicted_rings"] and null["agrees"]
     assert record["prediction"]["agrees"]
+
+
+def test_a_redundant_arms_log_imported_from_t_q_v_gives_the_same_data_stages(tmp_path):
+    """The importer at n = 7: the Panda's own log cut to t, q (14 wide) and v (13), written as
+    another tool would, imported against the robot, analysed with the spec as its declared
+    controller: the same data-stage numbers as the simulated log's, bitwise, and the damping
+    theory with the null-space mode."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pipeline.analysis.stages import analyze_log
+    from pipeline.importer.mapping import load_mapping
+    from pipeline.logs import verify_log
+    from pipeline.store.door import ArtefactStore, import_log
+
+    r = run_cli("run", SPEC, "--out", str(tmp_path / "sim"))
+    assert r.returncode == 0, r.stderr
+    log = verify_log(tmp_path / "sim" / SPEC / "run.parquet")
+    original = analyze_log(log)
+    cols = log.columns(["t", "q", "v"])
+    src = tmp_path / "cut.parquet"
+    pq.write_table(pa.table({"t": cols["t"], "q": list(cols["q"]), "v": list(cols["v"])}), src)
+    done = import_log(src, load_mapping(None, {"robot": SPEC}), "cut", tmp_path / "logs")
+    assert done.rows == len(cols["t"])
+    store = ArtefactStore(done.path.parents[2], tmp_path / "rep")
+    rec = store.analysis(store.open_log(done.path), quiet=True,
+                         controller=load_spec(SPEC)).record
+    assert rec.directions == original.directions and rec.dominant == original.dominant
+    assert len(rec.directions) == 13
+    names = [m.name for m in rec.damping.modes]
+    assert "null-space ν_n,1" in names and len(names) == 10

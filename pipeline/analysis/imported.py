@@ -22,7 +22,6 @@ import numpy as np
 from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.stages import (
-    analysis_robot,
     bus_rate_data,
     choose_window,
     direction_stages,
@@ -77,7 +76,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         check_controller(log, controller)
     n, dt = log.rows, log.spec.mission.dt
     win = choose_window(n, dt, window_start, str(log.path))
-    robot = analysis_robot(log)
+    robot = GiordanoRobot(log.spec)
     # The provenance check is one only against a σ the source logged itself: σ columns the
     # import rebuilt from this q would agree with Γ rebuilt from it by construction.
     own_sigma = log.meta.imported.get("s_min_G_from") == S_MIN_G_SOURCE

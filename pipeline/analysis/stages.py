@@ -112,13 +112,6 @@ def require_provenance(path, prov: rs.Provenance) -> None:
                           f"(tolerance {PROVENANCE_TOL:g})")
 
 
-def analysis_robot(log: VerifiedLog) -> GiordanoRobot:
-    """The robot a log was run with, for the analysis' stages: an arm of six joints. A
-    redundant arm's log (eq. 37) is refused: its simulation is built, but not yet the
-    analysis of its null-space directions, modes and map (stage 4 and eq. 34 at n > 6)."""
-    return GiordanoRobot(log.spec)
-
-
 def analyze_log(log: VerifiedLog, window_start: float | None = None,
                 check: bool = True) -> rs.AnalysisRecord:
     """All single-log stages; returns the analysis record (the content of analysis.json).
@@ -136,7 +129,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     n = log.rows
     dt = spec.mission.dt
     win = choose_window(n, dt, window_start, str(path))
-    robot = analysis_robot(log)
+    robot = GiordanoRobot(spec)
 
     prov, directions, dominant, nu_breve = direction_stages(robot, log, win, check)
 
@@ -247,7 +240,7 @@ def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
     path, meta, spec = log.path, log.meta, log.spec
     log.require(REQUIRED)
     n = log.rows
-    robot = analysis_robot(log)
+    robot = GiordanoRobot(spec)
     prov, _, _, _ = rebuild_and_project(robot, log, Window(0, n, "the whole diverged log"))
     require_provenance(path, prov)
     flags = limit_flags(robot.shape)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.analysis.ringing import MOST, Ring, ring
+from pipeline.shapes import BREVE
 from pipeline.sim import margins as mg
 from pipeline.sim.stability import (
     GAIN_BLOCKS,
@@ -51,7 +52,7 @@ from pipeline.sim.stability import (
 )
 
 # The limit names of each gain block's 3-block of ν̆ (eq. 16), and its units.
-BLOCK_LIMITS = ("omega_b", "nu_e_lin", "nu_e_ang", "null_space")
+BLOCK_LIMITS = BREVE._fields  # omega_b, nu_e_lin, nu_e_ang, null_space
 BLOCK_UNITS = ("rad/s", "m/s", "rad/s", "rad/s")
 AT_BOUND_REL = 0.01  # a step or a rate within 1 % of its bound is at the bound (as eq. 16's C16)
 SAME_PERIOD = 0.05  # relative: two rings of one period (the periodogram's peaks)

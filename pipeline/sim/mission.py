@@ -48,6 +48,7 @@ from pipeline.sim.plant import (
     limit_bus_torque,
 )
 from pipeline.sim.robot import GiordanoRobot, Terms
+from pipeline.sim.robot_file import check_null_space
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.stability import (
     bisect_critical_step,
@@ -106,6 +107,7 @@ class Mission:
     def __init__(self, spec: Spec, robot: GiordanoRobot | None = None):
         self.spec = spec
         self.robot = robot or GiordanoRobot(spec)
+        check_null_space(spec, self.robot.shape)
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self.layout: StepLayout = step_layout(self.robot.shape)

@@ -245,8 +245,8 @@ def robot_shape(model: pin.Model) -> RobotShape:
 def load_spec_robot(spec: Spec) -> pin.Model:
     """The model of a spec's robot block: :func:`load_robot_model` with its file, camera frame,
     bus inertia scale, package folders and locked joints, for the stages: 6 to ``MAX_JOINTS``
-    arm joints, a redundant arm's with its null-space impedance (eq. 37f), and ``robot.q_bar``
-    one angle per arm joint."""
+    arm joints (a loop of a redundant arm needs its null-space impedance:
+    :func:`check_null_space`), and ``robot.q_bar`` one angle per arm joint."""
     model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
                              spec.robot.bus_inertia_scale, spec.package_dirs,
                              spec.robot.locked_joints)
@@ -255,6 +255,17 @@ def load_spec_robot(spec: Spec) -> pin.Model:
         raise SpecError(f"{spec.robot_path}: {shape.n} arm joints ({', '.join(shape.joints)}): "
                         f"the loop runs arms of {TASK_DOF} to {MAX_JOINTS} joints; lock "
                         f"{shape.n - MAX_JOINTS} in robot.locked_joints")
+    if len(spec.robot.q_bar) != shape.n:
+        raise SpecError(f"spec {spec.name}: field robot.q_bar: {len(spec.robot.q_bar)} joint "
+                        f"angles for the {shape.n} arm joints of {spec.robot_path.name} "
+                        f"({', '.join(shape.joints)})")
+    return model
+
+
+def check_null_space(spec: Spec, shape: RobotShape) -> None:
+    """The loop's null-space impedance against the arm (eq. 37f): ``controller.null_space``
+    required for a redundant arm, refused for six joints. The loop's check, not the robot's:
+    an imported log's spec carries the robot and no controller."""
     k = shape.null_space_dim
     if k and spec.controller.null_space is None:
         raise SpecError(f"spec {spec.name}: field controller.null_space: {shape.n} arm joints "
@@ -266,11 +277,6 @@ def load_spec_robot(spec: Spec) -> pin.Model:
         raise SpecError(f"spec {spec.name}: field controller.null_space: the {shape.n} arm "
                         f"joints of {spec.robot_path.name} leave no null space (eq. 37 is a "
                         f"redundant arm's, more than {TASK_DOF} joints)")
-    if len(spec.robot.q_bar) != shape.n:
-        raise SpecError(f"spec {spec.name}: field robot.q_bar: {len(spec.robot.q_bar)} joint "
-                        f"angles for the {shape.n} arm joints of {spec.robot_path.name} "
-                        f"({', '.join(shape.joints)})")
-    return model
 
 
 @dataclass(frozen=True)

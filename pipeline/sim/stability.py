@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.shapes import BREVE
+
 
 def critical_step(mu_max: float) -> float:
     """dt*_damping = 2/μ_max: forward Euler on the damping alone is stable iff dt < it (eq. 24).
@@ -204,15 +206,16 @@ BUS_YAW_AXIS = 2  # ω_b,z: the mode μ_bus = D_b/I_zz,bus of the robot card pre
 # The blocks of D̆ and the spec's gains that set them (eqs. 13, 37f): the three task blocks of
 # three, then a redundant arm's null-space block (controller.null_space.D), the rest of v̆.
 GAIN_BLOCKS = ("bus", "cam_pos", "cam_ori", "null_space")
-TASK_BLOCKS = 3
 GAIN_FIELDS = {"bus": "controller.gains.bus.D", "cam_pos": "controller.gains.cam_pos.D",
                "cam_ori": "controller.gains.cam_ori.D", "null_space": "controller.null_space.D"}
 
 
 def block_slices(n_breve: int) -> tuple[slice, ...]:
-    """v̆'s gain blocks for a v̆ of ``n_breve`` components (eqs. 13, 37f)."""
-    task = tuple(slice(3 * b, 3 * b + 3) for b in range(TASK_BLOCKS))
-    return task + ((slice(3 * TASK_BLOCKS, n_breve),) if n_breve > 3 * TASK_BLOCKS else ())
+    """v̆'s gain blocks for a v̆ of ``n_breve`` components (eqs. 13, 37f): the task blocks of
+    :data:`pipeline.shapes.BREVE`, then the null space's to the end."""
+    task = (BREVE.omega_b, BREVE.nu_e_lin, BREVE.nu_e_ang)
+    null = BREVE.null_space.start
+    return task + ((slice(null, n_breve),) if n_breve > null else ())
 
 
 def axis_name(i: int) -> str:
@@ -257,7 +260,7 @@ class DampingMode:
     @property
     def null_space(self) -> bool:
         """Whether a redundant arm's null-space damping sets it (eq. 37f)."""
-        return self.block == TASK_BLOCKS
+        return self.block == GAIN_BLOCKS.index("null_space")
 
 
 def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]:
