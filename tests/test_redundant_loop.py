@@ -181,3 +181,24 @@ def test_a_redundant_arms_log_imported_from_t_q_v_gives_the_same_data_stages(tmp
     assert len(rec.directions) == 13
     names = [m.name for m in rec.damping.modes]
     assert "null-space ν_n,1" in names and len(names) == 10
+
+
+@pytest.mark.parametrize("plant", [{}, {"mission.plant.model": "sampled"},
+                                   {"mission.plant.model": "sampled",
+                                    "mission.plant.delay_steps": 1}])
+def test_the_flown_map_of_a_redundant_arm_is_the_simulators_step(plant):
+    """Eq. 37f's map against finite differences of the simulator's own step (and of the
+    sampled-data plant, without and with one step of delay, eq. 34): z = [x̃; η; e], η the
+    self-motion coordinate, at the Panda's rest state."""
+    from pipeline.analysis.linearization import simulator_map
+
+    lin = simulator_map(with_overrides(load_spec(SPEC), plant, name="fd"))
+    n = 10 * (3 if plant.get("mission.plant.delay_steps") else 2)
+    assert lin.Phi_fd.shape == lin.Phi_theory.shape == (n, n)
+    scale = np.max(np.abs(lin.Phi_theory))
+    assert lin.max_abs_diff <= 1e-5 * scale, (lin.max_abs_diff, scale)
+    # The null-space spring is in the map: η feeds ν_n's command (the row of e_n, or with a
+    # delay the newest increment's slot), in the simulator's step as in the theory.
+    row = n - 1
+    assert abs(lin.Phi_theory[row, 9]) > 1e-3 * scale
+    assert abs(lin.Phi_fd[row, 9] / lin.Phi_theory[row, 9] - 1) < 1e-4

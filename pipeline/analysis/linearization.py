@@ -5,7 +5,11 @@ The simulator is put at a rest steady state: a static reference equal to the sta
 the posture spring's q̄ at the start posture, so x̃ = 0 and e = v̆ − v̆_des = 0 there.
 Each coordinate of z = [x̃; e] is perturbed by ±h (x̃ through a configuration change that
 keeps the CoM fixed, δθ = Γ⁻¹ [0; J_x⁻¹ δx̃]) and one ``Mission.step`` is taken; the central
-differences give ∂z⁺/∂z, to compare with ``theory.flown_map`` at the same state.
+differences give ∂z⁺/∂z, to compare with ``theory.flown_map`` at the same state. A redundant
+arm's z = [x̃; η; e] adds its null-space coordinate η (η̇ = ν_n, eq. 37f), perturbed along the
+self-motion (Γ⁻¹'s null-space columns) and read from a configuration as the null-space rows
+of Γ(q_0) applied to its difference from q_0 (exact to first order, which central differences
+keep).
 """
 
 from __future__ import annotations
@@ -15,11 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.analysis.theory import flown_map, posture_stiffness
+from pipeline.analysis.theory import flown_map
 from pipeline.shapes import Q
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.base_guidance import Reference
 from pipeline.sim.mission import LoopState, Mission, task_errors
+from pipeline.sim.stability import loop_stiffness, position_jacobian
 from pipeline.spec import Spec
 
 
@@ -52,12 +57,15 @@ def _rest_reference(mission: Mission, q: np.ndarray) -> Reference:
                      R_e=T.R_te, w_e=z3, aim=T.p_e + T.R_te[:, 2])
 
 
-def _z(mission: Mission, s: LoopState) -> np.ndarray:
-    """z = [x̃; v̆ − v̆_des] of a state under the mission's (static) guidance."""
+def _z(mission: Mission, s: LoopState, q0: np.ndarray, Y0: np.ndarray) -> np.ndarray:
+    """z = [x̃; η; v̆ − v̆_des] of a state under the mission's (static) guidance; η, a
+    redundant arm's null-space coordinate, is Y0 (Γ(q0)'s null-space rows) on the state's
+    configuration difference from q0 (empty for six joints)."""
     T = mission.robot.terms(s.q, s.v, dynamics=False)
     gamma = conditioning_scale(T.s_min_G, mission.spec.controller)
     err = task_errors(T, mission.guidance.reference(s.tau), gamma, s.v_c)
-    return np.concatenate([err.x_tilde, s.v_breve - err.v_breve_des])
+    eta = Y0 @ pin.difference(mission.robot.model, q0, s.q)
+    return np.concatenate([err.x_tilde, eta, s.v_breve - err.v_breve_des])
 
 
 def _state(mission: Mission, q: np.ndarray, v_breve: np.ndarray) -> LoopState:
@@ -82,12 +90,11 @@ def _force_increment(mission: Mission, q: np.ndarray, tau: np.ndarray) -> np.nda
 
 def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     """∂w⁺/∂w of ``Mission.step`` about the rest state at the start pose, and the flown map Φ
-    there (eq. 34): the spec's integrator, plant and delay. w = [x̃; e] (18), and with one step
-    of delay the velocity increment the held command carries (27)."""
+    there (eq. 34): the spec's integrator, plant and delay. w = [x̃; e] (18; [x̃; η; e] of
+    2(9 + k) for a redundant arm), and with one step of delay the velocity increment the held
+    command carries (9 + k more)."""
     mission = Mission(spec)
-    if mission.robot.shape.null_space_dim:
-        raise ValueError(f"{spec.name}: the finite-difference map is built for six-joint arms "
-                         "(a redundant arm's null-space coordinate η has no state to perturb)")
+    shape = mission.robot.shape
     q0 = mission.q0.copy()
     mission.guidance = StaticGuidance(_rest_reference(mission, q0))
     mission.robot.q_bar = q0[Q.joints].copy()  # the posture spring is at rest too
@@ -97,29 +104,33 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     T0 = mission.robot.terms(q0, np.zeros(model.nv))
     gamma = conditioning_scale(T0.s_min_G, spec.controller)
     err0 = task_errors(T0, mission.guidance.reference(0.0), gamma, np.zeros(3))
-    J_x = err0.J_x
+    n = shape.n_breve  # the map's position and velocity coordinates each
+    J_x = position_jacobian(err0.J_x, n)
+    Y0 = T0.gamma[12:]  # ν_n = Y0 v: the null-space rows (eq. 37c), none for six joints
 
-    size = 18 + 9 * delay
+    size = 2 * n + n * delay
     W, Wp = np.zeros((size, size)), np.zeros((size, size))
     for j in range(size):
         cols = []
         for sgn in (1.0, -1.0):
             dw = np.zeros(size)
             dw[j] = sgn * h
-            dtheta = T0.gamma_inv @ np.concatenate([np.zeros(3), np.linalg.solve(J_x, dw[:9])])
-            s = _state(mission, pin.integrate(model, q0, dtheta), dw[9:18])
+            dtheta = T0.gamma_inv @ np.concatenate([np.zeros(3), np.linalg.solve(J_x, dw[:n])])
+            s = _state(mission, pin.integrate(model, q0, dtheta), dw[n:2 * n])
             if delay:
-                mission._held = _increment_force(mission, q0, dw[18:])
+                mission._held = _increment_force(mission, q0, dw[2 * n:])
             nxt, _ = mission.step(s)
             held = [_force_increment(mission, q0, mission._held)] if delay else []
-            cols.append((np.concatenate([_z(mission, s), dw[18:]]),
-                         np.concatenate([_z(mission, nxt), *held])))
+            cols.append((np.concatenate([_z(mission, s, q0, Y0), dw[2 * n:]]),
+                         np.concatenate([_z(mission, nxt, q0, Y0), *held])))
         W[:, j] = cols[0][0] - cols[1][0]
         Wp[:, j] = cols[0][1] - cols[1][1]
     Phi_fd = Wp @ np.linalg.inv(W)
 
-    K, D = block_gains(spec.controller, gamma)
-    K_x = J_x.T @ K + posture_stiffness(T0.gamma_inv, spec.controller.gains.posture, J_x)
+    ctrl = spec.controller
+    K, D = block_gains(ctrl, gamma, shape.null_space_dim)
+    K_x = loop_stiffness(J_x, K, T0.gamma_inv, ctrl.gains.posture,
+                         0.0 if ctrl.null_space is None else ctrl.null_space.K)
     Phi = flown_map(T0.reduced_inertia, D, K_x, J_x, spec.mission.dt,
                     spec.controller.integrator, plant.model, delay)
     return Linearization(Phi_fd, Phi, float(np.abs(Phi_fd - Phi).max()))
