@@ -202,3 +202,17 @@ def test_the_flown_map_of_a_redundant_arm_is_the_simulators_step(plant):
     row = n - 1
     assert abs(lin.Phi_theory[row, 9]) > 1e-3 * scale
     assert abs(lin.Phi_fd[row, 9] / lin.Phi_theory[row, 9] - 1) < 1e-4
+
+
+def test_a_sweep_of_the_null_space_damping(tmp_path):
+    """The sweep at n = 7 (embedded Dask): the null-space damping swept across forward
+    Euler's bound at dt 0.005 s; each point's analysis sees its own fastest mode and map."""
+    from sweep_helpers import sweep, table
+
+    r = sweep(tmp_path, "short_panda_nominal", "--set", "controller.null_space.D=0.5,300",
+              "--set", "mission.dt=0.005", "--set", "mission.duration=5", "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    t = table(tmp_path).set_index("controller.null_space.D").sort_index()
+    assert list(t["status"]) == ["complete", "complete"]
+    assert t.loc[0.5, "spectral_radius"] < 1.0 < t.loc[300.0, "spectral_radius"]
+    assert t.loc[300.0, "dt_mu_max"] > 2.0 > t.loc[0.5, "dt_mu_max"]

@@ -178,6 +178,32 @@ def _consistency() -> Outcome:
                        else float("inf")), tol)
 
 
+@check("38", "one-sided Clopper–Pearson bound vs the binomial tail it defines "
+       "(P(X ≥ k | N, p_L) = 1 − C, SciPy's binomial); the zero-failure N vs the least N "
+       "with p^N ≤ 1 − C found by counting",
+       "pipeline.analysis.confidence.lower_bound",
+       "pipeline.analysis.confidence.samples_needed")
+def _confidence() -> Outcome:
+    import scipy.stats
+
+    from pipeline.analysis.confidence import lower_bound, samples_needed
+
+    cases = [(852, 852, 0.9), (851, 852, 0.9), (40, 50, 0.95), (3, 7, 0.99)]
+    tails = [abs(scipy.stats.binom.sf(k - 1, n, lower_bound(k, n, c)) / (1 - c) - 1)
+             for k, n, c in cases]
+    counted = []
+    for p, c in ((0.9973, 0.9), (0.9973, 0.95), (0.5, 0.75)):
+        n = 1
+        while p**n > 1 - c:
+            n += 1
+        counted.append(abs(samples_needed(p, c) - n))
+    return Outcome("4 (k, N, C) cases; p = 0.9973 at C = 90 % and 95 %, 0.5 at 75 %",
+                   max(*tails, *counted), 1e-9,
+                   f"tail relative error {max(tails):.1e}; N for 0.9973: "
+                   f"{samples_needed(0.9973, 0.9)} at 90 %, {samples_needed(0.9973, 0.95)} "
+                   "at 95 %")
+
+
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
 # :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
@@ -190,4 +216,5 @@ CHECKS = (
     _attitude_jitter,
     _roll_smear,
     _consistency,
+    _confidence,
 )

@@ -1,0 +1,68 @@
+"""The verdict at a stated confidence (eq. 38, issue 35 item 2) against what others computed:
+the sample sizes Hanson and Beard publish, the binomial tail that defines the Clopper–Pearson
+bound (SciPy's binomial distribution, not the beta quantile the code takes), its closed form
+with no failure, and SciPy's own exact interval."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from pipeline.analysis.confidence import confidence_verdict, lower_bound, samples_needed
+
+
+@pytest.mark.parametrize(("p", "c", "n"), [(0.9973, 0.90, 852), (0.9973, 0.95, 1109),
+                                           (0.5, 0.75, 2), (0.9, 0.9, 22)])
+def test_samples_needed_are_the_published_ones_and_the_least(p, c, n):
+    """852 at 90 %: NASA/TP-2010-216447 (and issue 35). At 95 % issue 35 says 1108, but
+    ln(0.05)/ln(0.9973) = 1108.03: 1108 passes give p_L = 0.05^(1/1108) = 0.997296 < 0.9973,
+    so 1109 is the least. 0.5² = 0.25 exactly at C = 0.75."""
+    assert samples_needed(p, c) == n
+    assert p**n <= 1 - c < p ** (n - 1)
+
+
+@pytest.mark.parametrize(("k", "n", "c"), [(852, 852, 0.9), (851, 852, 0.9), (40, 50, 0.95),
+                                           (1, 10, 0.9), (1109, 1109, 0.95), (3, 7, 0.99)])
+def test_the_bound_is_where_the_binomial_tail_is_one_minus_c(k, n, c):
+    p_low = lower_bound(k, n, c)
+    # P(X ≥ k) at the bound is 1 − C; just below it, less likely still.
+    assert scipy.stats.binom.sf(k - 1, n, p_low) == pytest.approx(1 - c, rel=1e-9)
+    assert scipy.stats.binom.sf(k - 1, n, p_low * (1 - 1e-6)) < 1 - c
+    # SciPy's exact two-sided interval at level 1 − 2α has the one-sided bound at 1 − α.
+    ci = scipy.stats.binomtest(k, n).proportion_ci(confidence_level=1 - 2 * (1 - c),
+                                                   method="exact")
+    assert p_low == pytest.approx(ci.low, rel=1e-12)
+
+
+def test_no_failure_is_the_closed_form_and_the_verdict_follows_the_bound():
+    for n in (1, 22, 852):
+        assert lower_bound(n, n, 0.9) == pytest.approx(0.1 ** (1 / n), rel=1e-12)
+    v = confidence_verdict(852, 852, 0.9973, 0.9)
+    assert v.meets and v.needed == 852 and v.fraction == 1.0
+    one_failure = confidence_verdict(851, 852, 0.9973, 0.9)
+    assert not one_failure.meets and one_failure.lower_bound < 0.9973
+    assert lower_bound(0, 10, 0.9) == 0.0
+
+
+@pytest.mark.parametrize(("call", "words"), [
+    (lambda: samples_needed(1.0, 0.9), "p = 1.0"),
+    (lambda: samples_needed(0.9, 0.0), "confidence = 0.0"),
+    (lambda: lower_bound(11, 10, 0.9), "passes = 11 of n = 10"),
+    (lambda: lower_bound(1, 10, math.nan), "confidence = nan"),
+])
+def test_bad_arguments_are_refused_naming_them(call, words):
+    with pytest.raises(ValueError, match=words.replace("(", r"\(")):
+        call()
+
+
+def test_the_bound_is_a_lower_bound_in_coverage():
+    """Coverage, by simulation: at a true p, the bound lies below p in at least C of the
+    experiments (Clopper–Pearson is conservative)."""
+    rng = np.random.default_rng(35)
+    p, n, c = 0.97, 200, 0.9
+    passes = rng.binomial(n, p, size=4000)
+    covered = np.mean([lower_bound(int(k), n, c) <= p for k in passes])
+    assert covered >= c
