@@ -2,8 +2,8 @@
 in order, with their widths, sized by the robot's shape (:class:`pipeline.shapes.RobotShape`).
 The kernel's row (:mod:`pipeline.sim.control_step`), the log's columns (:mod:`pipeline.logs`)
 and the row's size in the budget (:mod:`pipeline.budget`) are all read from here; the kernels
-read each field's place from the layout of the robot that runs (the places are an argument,
-the same Numba type for every arm).
+freeze each field's place for every joint count (``control_step.STEP_PLACES``), so this file is
+part of their cache key (:data:`pipeline.sim.jit.KERNEL_CONSTANTS`).
 """
 
 from __future__ import annotations

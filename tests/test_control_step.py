@@ -274,3 +274,37 @@ def test_cached_pinocchio_views_follow_every_call(mission):
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
         np.testing.assert_allclose(got[8], pin.computeCentroidalMap(robot.model, fresh, q),
                                    rtol=0, atol=1e-12)
+
+
+def test_every_module_whose_names_the_kernels_freeze_is_in_their_cache_key():
+    """A compiled kernel freezes the globals it reads (the shapes' blocks, TASK_DOF, the
+    layouts' places): a module outside pipeline/sim that supplies one must be hashed into the
+    kernels' cache folder (jit.KERNEL_CONSTANTS), or an edit of it would leave stale kernels."""
+    import ast
+    import importlib
+    import types
+
+    from numba.core.registry import CPUDispatcher
+
+    def names(code: types.CodeType) -> set[str]:
+        out = set(code.co_names)
+        for const in code.co_consts:
+            if isinstance(const, types.CodeType):
+                out |= names(const)
+        return out
+
+    supplying = set()
+    for path in sorted(jit_mod.SIM_DIR.glob("*.py")):
+        module = importlib.import_module(f"pipeline.sim.{path.stem}")
+        origin = {alias.asname or alias.name: node.module
+                  for node in ast.walk(ast.parse(path.read_text()))
+                  if isinstance(node, ast.ImportFrom) and node.module
+                  and node.module.startswith("pipeline.")
+                  and not node.module.startswith("pipeline.sim")
+                  for alias in node.names}
+        for obj in vars(module).values():
+            if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == module.__name__:
+                supplying |= {origin[n] for n in names(obj.py_func.__code__) if n in origin}
+    hashed = {f"pipeline.{p.stem}" for p in jit_mod.KERNEL_CONSTANTS}
+    assert "pipeline.shapes" in supplying  # the scan sees them
+    assert supplying <= hashed, supplying - hashed

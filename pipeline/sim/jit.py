@@ -36,8 +36,9 @@ from numba.core import config
 from pipeline.paths import source_checkout, user_cache_dir
 
 SIM_DIR = Path(__file__).resolve().parent
-# A file outside this folder whose constants the kernels freeze: the log row's layout.
-KERNEL_CONSTANTS = (SIM_DIR.parent / "log_layout.py",)
+# The files outside this folder whose constants the kernels freeze: the log row's layout and
+# the shapes (their blocks, TASK_DOF, MAX_JOINTS; tests/test_control_step.py finds them).
+KERNEL_CONSTANTS = (SIM_DIR.parent / "log_layout.py", SIM_DIR.parent / "shapes.py")
 
 
 def source_stamp(directory: Path = SIM_DIR) -> str:
