@@ -12,6 +12,12 @@ drift of the host's speed between repeats does not enter them:
   its time variation);
 - ``sim_step_us``: one whole controller step of the nominal mission (both loops, guidance,
   coverage, filling the log's columns), from ``Mission.run``;
+- ``sampled_step_us``: the same mission's step on the sampled-data plant with one step of
+  delay (eq. 29: RK4 on the compiled articulated-body algorithm), and its ratio to the
+  simulator's step (``sampled_ratio``, target ≤ 4);
+- ``montecarlo``: the wall time of an 852-sample Monte Carlo of that 60 s mission on two
+  workers (``specs/montecarlo/bench_sampled_delay.yaml``; 40 samples in quick mode), its
+  records in a fresh folder (target ≤ 600 s);
 - ``analysis_step_us``: the per-step analysis of a log (Γ rebuilt from q, per-direction SVD,
   lag-1), streamed by row group as ``analyze`` does it;
 - growth of mission wall time with length (10³, 10⁴, 10⁵ steps) and its fitted exponent;
@@ -99,15 +105,36 @@ def step_costs(spec: Spec, log: Path, repeats: int) -> dict:
     q, v = cols["q"], cols["v"]
     robot = GiordanoRobot(spec)
     analysis_once(robot, log)  # warm-up: compiles the analysis kernels if the cache is cold
-    floor, sim, ana = [], [], []
+    sampled_spec = with_overrides(spec, {"mission.plant.model": "sampled",
+                                         "mission.plant.delay_steps": 1}, name="bench_sampled")
+    floor, sim, ana, sampled = [], [], [], []
     for _ in range(repeats):
         floor.append(floor_once(robot, q, v))
         sim.append(sim_once(spec))
+        sampled.append(sim_once(sampled_spec))
         ana.append(analysis_once(robot, log))
     f = np.asarray(floor)
     return {"floor_us": _stats(floor), "sim_step_us": _stats(sim), "analysis_step_us": _stats(ana),
+            "sampled_step_us": _stats(sampled),
             "sim_ratio": _stats(list(np.asarray(sim) / f)),
+            "sampled_ratio": _stats(list(np.asarray(sampled) / np.asarray(sim))),
             "analysis_ratio": _stats(list(np.asarray(ana) / f))}
+
+
+def montecarlo_wall(samples: int, folder: Path) -> dict:
+    """Wall time (s) of ``python -m pipeline montecarlo bench_sampled_delay`` with
+    ``samples`` samples on two workers, from an empty record folder (start-up included)."""
+    cmd = [sys.executable, "-m", "pipeline", "montecarlo", "bench_sampled_delay",
+           "--samples", str(samples), "--workers", "2", "--logs", str(folder / "logs"),
+           "--out", str(folder / "out")]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if r.returncode != 0:
+        return {"samples": samples, "skipped": (r.stderr.strip().splitlines() or ["?"])[-1]}
+    verdict = json.loads((folder / "out" / "bench_sampled_delay" / "verdict.json").read_text())
+    return {"samples": samples, "wall_s": wall, "driver_s": verdict["wall_s"],
+            "per_sample_s": wall / samples, "skipped": ""}
 
 
 def growth(spec: Spec, lengths: list[int], repeats: int) -> dict:
@@ -213,6 +240,9 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         big = tiled_log(long, log_path(tmp / "big", "bench_long"), 10)
         memory = {f"{n_mem}": peak_memory_mb(long, tmp / "a1"),
                   f"{10 * n_mem}": peak_memory_mb(big, tmp / "a2")}
+        n_mc = 40 if quick else 852
+        _progress(f"a Monte Carlo of {n_mc} samples of the 60 s sampled mission, 2 workers")
+        montecarlo = montecarlo_wall(n_mc, tmp / "montecarlo")
     _progress(f"the step's linear algebra against BLAS and LAPACK, {repeats} repeats")
     linalg = linalg_costs(repeats)
     sweeps = {k: v.as_dict() for k, v in sweep_throughput(progress=_progress).items()}
@@ -221,6 +251,10 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         "sim_step_us": costs["sim_step_us"],
         "sim_ratio": costs["sim_ratio"]["median"],
         "sim_ratio_stats": costs["sim_ratio"],
+        "sampled_step_us": costs["sampled_step_us"],
+        "sampled_ratio": costs["sampled_ratio"]["median"],
+        "sampled_ratio_stats": costs["sampled_ratio"],
+        "montecarlo": montecarlo,
         "analysis_step_us": costs["analysis_step_us"],
         "analysis_ratio": costs["analysis_ratio"]["median"],
         "analysis_ratio_stats": costs["analysis_ratio"],
@@ -250,7 +284,7 @@ def bench_markdown(r: dict) -> str:
     mem = "\n".join(f"| {n} | {mb:.0f} |" for n, mb in r["peak_memory_mb"].items())
     grow = "\n".join(f"| {n} | {w['median']:.2f} | {w['min']:.2f} | {w['max']:.2f} |"
                      for n, w in zip(g["steps"], g["wall_stats"], strict=True))
-    sr, ar = r["sim_ratio_stats"], r["analysis_ratio_stats"]
+    sr, ar, pr = r["sim_ratio_stats"], r["analysis_ratio_stats"], r["sampled_ratio_stats"]
     m = r["machine"]
     return f"""# Benchmark
 
@@ -261,14 +295,21 @@ Pinocchio {m['pinocchio']}, Numba {m['numba']}.{' Quick mode (shorter runs).' if
 |---|---|---|---|
 {row('floor: Pinocchio calls of one step', r['floor_us'])}
 {row('simulator: whole controller step', r['sim_step_us'])}
+{row('sampled-data plant, one step of delay: whole step', r['sampled_step_us'])}
 {row('analysis: Γ rebuild, per-direction SVD, lag-1', r['analysis_step_us'])}
 
 Each repeat measures the floor, the simulator and the analysis back to back; a ratio is the
 median over repeats of that repeat's step / floor (min–max in brackets).
 
 - sim_ratio = {r['sim_ratio']:.2f} [{sr['min']:.2f}–{sr['max']:.2f}] (target ≤ 10)
+- sampled_ratio = {r['sampled_ratio']:.2f} [{pr['min']:.2f}–{pr['max']:.2f}] (the sampled step
+  over the simulator's; target ≤ 4)
 - analysis_ratio = {r['analysis_ratio']:.2f} [{ar['min']:.2f}–{ar['max']:.2f}] (target ≤ 3)
 - {r['steps_per_s']:.0f} simulator steps per second.
+
+## Monte Carlo
+
+{montecarlo_markdown(r["montecarlo"])}
 
 ## Growth with mission length (fitted exponent {g['exponent']:.3f})
 
@@ -305,6 +346,16 @@ job submission, workers up with their imports) is apart.
 """
 
 
+def montecarlo_markdown(m: dict) -> str:
+    if m.get("skipped"):
+        return f"{m['samples']} samples of the 60 s sampled mission: skipped ({m['skipped']})."
+    return (f"{m['samples']} samples of the 60 s sampled mission with one step of delay "
+            f"(`specs/montecarlo/bench_sampled_delay.yaml`) on two workers: {m['wall_s']:.1f} s "
+            f"wall from the command's start (target ≤ 600 s for 852), {m['per_sample_s']:.3f} "
+            f"s per sample; the driver's own count from its cluster's start "
+            f"{m['driver_s']:.1f} s.")
+
+
 def sweep_markdown(sweeps: dict) -> str:
     rows = ["| setting | workers | points/s | start-up (s) | task (s) | overhead/point (s) "
             "| overhead ratio | against the mean task |", "|---|---|---|---|---|---|---|---|"]
@@ -321,7 +372,8 @@ def sweep_markdown(sweeps: dict) -> str:
 def bench_command(args) -> int:
     r = run_bench(Path(args.out), quick=args.quick)
     print(f"floor {r['floor_us']['median']:.1f} µs, sim {r['sim_step_us']['median']:.1f} µs "
-          f"(ratio {r['sim_ratio']:.2f}), analysis {r['analysis_step_us']['median']:.1f} µs "
+          f"(ratio {r['sim_ratio']:.2f}), sampled {r['sampled_step_us']['median']:.1f} µs "
+          f"({r['sampled_ratio']:.2f} × sim), analysis {r['analysis_step_us']['median']:.1f} µs "
           f"(ratio {r['analysis_ratio']:.2f}), growth exponent {r['growth']['exponent']:.3f}, "
           f"peak memory {r['peak_memory_mb']} MB -> {Path(args.out) / 'bench.json'}")
     return 0

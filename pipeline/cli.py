@@ -237,6 +237,18 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
     return sweep_command(a)
 
 
+def _cmd_montecarlo(a: argparse.Namespace) -> int:
+    from pipeline.montecarlo.driver import montecarlo_command
+
+    return montecarlo_command(a)
+
+
+def _cmd_power(a: argparse.Namespace) -> int:
+    from pipeline.montecarlo.power import power_command
+
+    return power_command(a)
+
+
 def _cmd_compile(a: argparse.Namespace) -> int:
     from pipeline.compile import compile_command
 
@@ -269,9 +281,22 @@ exit codes: 0 success; 1 a run failed or diverged, a check or a claim failed;
 2 bad input (one line naming the field or the file)."""
 
 
+class _StageFormatter(argparse.RawDescriptionHelpFormatter):
+    """Measures the stage names where they are printed: argparse lists a subcommand one indent
+    deeper than it measures it, so a stage name longer than the others (``montecarlo``) would
+    push its summary to a line of its own."""
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if isinstance(action, argparse._SubParsersAction) and action.choices:
+            longest = (max(len(name) for name in action.choices) + self._current_indent
+                       + 2 * self._indent_increment)
+            self._action_max_length = max(self._action_max_length, longest)
+
+
 def _formatter(prog: str) -> argparse.HelpFormatter:
     # Raw: the description and the examples keep their lines; wide: help texts on one line.
-    return argparse.RawDescriptionHelpFormatter(prog, max_help_position=32, width=100)
+    return _StageFormatter(prog, max_help_position=32, width=100)
 
 
 def _stage(sub, name: str, summary: str, example: str) -> argparse.ArgumentParser:
@@ -461,6 +486,66 @@ def build_parser() -> argparse.ArgumentParser:
                    help="table folder; writes DIR/<sweep>/sweep.parquet "
                    "(default: generated_reports/sweeps; e.g. --out /tmp/sweeps)")
     s.set_defaults(func=_cmd_sweep)
+
+    m = _stage(sub, "montecarlo", "dispersed missions on Dask, judged at a stated confidence",
+               "seed_dispersions --samples 40")
+    m.add_argument("file", help="a Monte Carlo file: a path, or a name under specs/montecarlo/ "
+                   "(e.g. seed_dispersions)")
+    m.add_argument("--samples", type=int, default=None, metavar="N",
+                   help="run the first N samples (default: the file's samples, else the count "
+                   "that shows its target with none failing, eq. 38b; e.g. --samples 40)")
+    m.add_argument("--sample", type=int, default=None, metavar="I",
+                   help="run sample I alone, write its log and compare its bits with the kept "
+                   "record (default: all samples; e.g. --sample 17)")
+    m.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="address of an existing Dask scheduler (default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
+                   "e.g. --scheduler tcp://10.0.0.5:8786)")
+    m.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="workers of the embedded cluster or of SLURM (default: 2; e.g. "
+                   "--workers 4)")
+    m.add_argument("--slurm", action="store_true",
+                   help="start the workers as SLURM jobs through dask-jobqueue "
+                   "(default: off; e.g. --slurm --workers 16)")
+    m.add_argument("--worker-timeout", type=float, default=None, metavar="S",
+                   help="fail (exit 2) if no worker joins within S seconds "
+                   "(default: 300; e.g. --worker-timeout 600)")
+    m.add_argument("--lifetime", type=float, default=None, metavar="S",
+                   help="SLURM workers retire after S seconds, before their walltime "
+                   "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
+    m.add_argument("--logs", default="logs/montecarlo", metavar="DIR",
+                   help="where each sample's record is kept, DIR/<montecarlo>/<sample>.json, "
+                   "and a sample run alone writes its log (default: logs/montecarlo; e.g. "
+                   "--logs /scratch/montecarlo)")
+    m.add_argument("--out", default="generated_reports/montecarlo", metavar="DIR",
+                   help="writes DIR/<montecarlo>/montecarlo.parquet and verdict.json "
+                   "(default: generated_reports/montecarlo; e.g. --out /tmp/montecarlo)")
+    m.set_defaults(func=_cmd_montecarlo)
+
+    w = _stage(sub, "power", "the ripple detectors' false alarms and misses against sensor "
+               "noise", "detector_power")
+    w.add_argument("file", help="a power file: a path, or a name under specs/montecarlo/ "
+                   "(e.g. detector_power)")
+    w.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="address of an existing Dask scheduler (default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
+                   "e.g. --scheduler tcp://10.0.0.5:8786)")
+    w.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="workers of the embedded cluster or of SLURM (default: 2; e.g. "
+                   "--workers 4)")
+    w.add_argument("--slurm", action="store_true",
+                   help="start the workers as SLURM jobs through dask-jobqueue "
+                   "(default: off; e.g. --slurm --workers 16)")
+    w.add_argument("--worker-timeout", type=float, default=None, metavar="S",
+                   help="fail (exit 2) if no worker joins within S seconds "
+                   "(default: 300; e.g. --worker-timeout 600)")
+    w.add_argument("--logs", default="logs/power", metavar="DIR",
+                   help="where each sample's record is kept (default: logs/power; e.g. --logs "
+                   "/scratch/power)")
+    w.add_argument("--out", default="generated_reports/power", metavar="DIR",
+                   help="writes DIR/<name>/power.parquet and power.json "
+                   "(default: generated_reports/power; e.g. --out /tmp/power)")
+    w.set_defaults(func=_cmd_power)
 
     k = _stage(sub, "compile", "compile the Numba kernels into their cache once, on two cores "
                "(every stage also compiles what it needs on first use)", "--processes 2")

@@ -26,6 +26,8 @@ row         the step kernel's readers and writers, γ (eq. 20), coverage   linal
 step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
 analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics,
                                                                            redundancy
+plant       the sampled-data plant: RK4 on the articulated-body algorithm  linalg
+            (eq. 29)
 ==========  =============================================================  =================
 
 The order is the priority: the unit with the longest chain of compile time still behind it
@@ -305,6 +307,21 @@ def _analysis() -> None:
     svd_right(gamma)
 
 
+def _plant() -> None:
+    """The sampled-data plant's step (eq. 29): RK4 on the compiled articulated-body algorithm,
+    as ``Mission._hold`` calls it, and the dynamics alone, as the equation check does."""
+    import numpy as np
+
+    from pipeline.sim.forward_dynamics import forward_dynamics, rigid_tree
+    from pipeline.sim.plant import integrate_held
+
+    s = seed()
+    tree = rigid_tree(s.robot.model)
+    tau = np.zeros(s.robot.model.nv)
+    forward_dynamics(tree, s.q.copy(), s.v.copy(), tau)
+    integrate_held(tree, s.q.copy(), s.v.copy(), tau, 0.03, s.spec.mission.plant.substeps)
+
+
 def _redundancy() -> None:
     """Eq. 37's kernels for a 7-joint arm (the shapes are not part of a kernel's type: any n
     uses the same specialisation)."""
@@ -341,6 +358,7 @@ UNITS = {u.name: u for u in (
     Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
     Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics", "redundancy"),
          _analysis),
+    Unit("plant", "the sampled-data plant's RK4 and dynamics (eq. 29)", ("linalg",), _plant),
 )}
 
 

@@ -53,11 +53,30 @@ class DampedInverse(_Block):
     damping: Positive = 0.02
 
 
+class BodyInertial(_Block):
+    """One rigid body's inertial parameters, replacing the file's (eq. 39): the mass (kg), the
+    centre of mass in the body's joint frame (m) and the rotational inertia about the centre
+    of mass in the joint frame's axes, [I_xx, I_yy, I_zz, I_xy, I_xz, I_yz] (kg·m²). Checked
+    physical when the robot is loaded: positive definite, and each principal moment at most
+    the sum of the other two."""
+
+    mass: Positive
+    com: Annotated[list[Finite], Field(min_length=3, max_length=3)]
+    inertia: Annotated[list[Finite], Field(min_length=6, max_length=6)]
+
+
+# The bodies robot.inertial may set: the rigid body on the free joint (the bus and all that is
+# fixed to it) and the one the camera frame is on (the arm's last body and its payload).
+INERTIAL_BODIES = ("bus", "payload")
+
+
 class RobotSpec(_Block):
     """The robot: a URDF or MJCF file (looked up beside the spec, then on the spec search
     path), its camera frame, q̄ and the damped inverse. ``bus_inertia_scale`` multiplies the
     rotational inertia of the rigid body on the free joint (the bus and all that is fixed to
-    it) about its own CoM, its mass and CoM unchanged: the knob of the bus-inertia sweep."""
+    it) about its own CoM, its mass and CoM unchanged: the knob of the bus-inertia sweep.
+    ``inertial`` replaces the file's inertial parameters of the bus or the payload (the body
+    the camera frame is on) with a Monte Carlo sample's (eq. 39), before the scale."""
 
     file: str = "robots/seed_ur3_box.xml"
     camera_frame: str = "camera"
@@ -73,6 +92,15 @@ class RobotSpec(_Block):
     # finger, a joint the mission does not use. The arm is the joints left (eq. 1); q_bar
     # gives one angle per arm joint, checked against the file when the robot is loaded.
     locked_joints: dict[str, Finite] = Field(default_factory=dict)
+    inertial: dict[str, BodyInertial] = Field(default_factory=dict)
+
+    @field_validator("inertial")
+    @classmethod
+    def _known_bodies(cls, v: dict[str, BodyInertial]) -> dict[str, BodyInertial]:
+        unknown = sorted(set(v) - set(INERTIAL_BODIES))
+        if unknown:
+            raise ValueError(f"unknown body {unknown[0]!r}: use {' or '.join(INERTIAL_BODIES)}")
+        return v
 
     @field_validator("q_bar")
     @classmethod
@@ -180,6 +208,22 @@ class Controller(_Block):
     null_space: NullSpaceImpedance | None = None
 
 
+class Sensors(_Block):
+    """What the controller's measurements add to the sampled plant's state (eq. 40): a rate
+    gyro on the bus (angle random walk ``gyro_arw`` in rad/√s, a constant bias per axis drawn
+    N(0, ``gyro_bias``²) in rad/s, its random walk ``gyro_bias_walk`` in rad/s/√s, quantisation
+    ``gyro_lsb`` in rad/s) and joint encoders (quantisation ``encoder_lsb`` in rad, which also
+    enters the joint rates taken from successive readings), drawn from ``seed``'s stream. The
+    bus pose and linear velocity are measured exactly."""
+
+    seed: int = 0
+    gyro_arw: NonNegative = 0.0
+    gyro_bias: NonNegative = 0.0
+    gyro_bias_walk: NonNegative = 0.0
+    gyro_lsb: NonNegative = 0.0
+    encoder_lsb: NonNegative = 0.0
+
+
 class Plant(_Block):
     """What moves between two control instants (eq. 29): ``reduced``, the simulator's update
     of the closed loop in reduced coordinates (eqs. 15, 22: the commanded velocity is the next
@@ -192,13 +236,15 @@ class Plant(_Block):
     delay_steps: int = Field(default=0, ge=0, le=1)
     # The bus's torque actuators (N·m): the held bus torque's norm saturated to it; 0: none.
     bus_torque_max: NonNegative = 0.0
+    # What the controller measures of the plant (eq. 40); None: the state itself.
+    sensors: Sensors | None = None
 
     @model_validator(mode="after")
     def _used_by_the_model(self) -> Plant:
         # The reduced update has no hold, no delay and no actuator: a field only the sampled
         # plant reads would be accepted and not simulated, and the analysis would then judge
         # a loop that never ran.
-        ignored = sorted(f for f in ("substeps", "delay_steps", "bus_torque_max")
+        ignored = sorted(f for f in ("substeps", "delay_steps", "bus_torque_max", "sensors")
                          if f in self.model_fields_set and self.model == "reduced"
                          and getattr(self, f) != type(self).model_fields[f].default)
         if ignored:
@@ -211,6 +257,10 @@ class Mission(_Block):
     dt: Positive = 0.03
     duration: Positive = 60.0
     plant: Plant = Plant()
+    # The bus's angular rate at the start (rad/s, bus frame): the tumble left after capture
+    # or insertion, a Monte Carlo's initial-state dispersion (eq. 39). Zero: at rest.
+    initial_omega_b: Annotated[list[Finite], Field(min_length=3, max_length=3)] = Field(
+        default=[0.0, 0.0, 0.0])
 
     @model_validator(mode="after")
     def _at_least_one_step(self) -> Mission:
@@ -324,8 +374,11 @@ INERT_FIELDS = (("config_sampling", "low"), ("config_sampling", "high"),
 
 
 # Fields that came after specs were hashed, and the value that means "not set": no locked
-# joints, no null-space impedance (a six-joint arm).
-UNSET_FIELDS = (("robot", "locked_joints", {}), ("controller", "null_space", None))
+# joints, no null-space impedance (a six-joint arm), the file's inertial parameters, a bus at
+# rest at the start.
+UNSET_FIELDS = (("robot", "locked_joints", {}), ("controller", "null_space", None),
+                ("robot", "inertial", {}), ("mission", "initial_omega_b", [0.0, 0.0, 0.0]),
+                ("mission.plant", "sensors", None))
 
 
 def spec_hash_of(content: dict[str, Any]) -> str:
@@ -338,9 +391,21 @@ def spec_hash_of(content: dict[str, Any]) -> str:
     # Fields added since, at their unset value, are the spec as it was before them: its hash
     # is unchanged.
     for block, key, unset in UNSET_FIELDS:
-        if isinstance(d.get(block), dict) and key in d[block] and d[block][key] == unset:
-            d[block] = {k: v for k, v in d[block].items() if k != key}
+        _drop_unset(d, block.split("."), key, unset)
     return canonical_hash(d)
+
+
+def _drop_unset(d: dict, path: list[str], key: str, unset: Any) -> None:
+    """Remove ``key`` from the block at ``path`` (copied on the way) when it holds ``unset``."""
+    node = d.get(path[0])
+    if not isinstance(node, dict):
+        return
+    if len(path) > 1:
+        d[path[0]] = dict(node)
+        _drop_unset(d[path[0]], path[1:], key, unset)
+        return
+    if key in node and node[key] == unset:
+        d[path[0]] = {k: v for k, v in node.items() if k != key}
 
 
 def canonical_hash(obj: Any) -> str:

@@ -80,7 +80,7 @@ LAYERS = (
     ("sim", "importer"),
     ("analysis",),
     ("store",),
-    ("verify", "sweep"),
+    ("verify", "sweep", "montecarlo"),
     ("claims",),
     ("reports",),
     ("bench", "bench_linalg", "validate", "compile", "cli", "__main__"),

@@ -27,6 +27,8 @@ from pipeline.claims.register import (
     OPERATORS,
     ClaimsFile,
     load_claims,
+    montecarlo_path,
+    needed_montecarlos,
     needed_runs,
     needed_sweeps,
     note_path,
@@ -89,6 +91,8 @@ class Context:
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> sweep.background.SweepJob, started by start_sweeps
+        self._mc_jobs: dict = {}  # alias -> montecarlo.background.MonteCarloJob
+        self._montecarlos: dict[str, tuple[dict, dict]] = {}
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key
         # (pipeline.store.validity.current_claims).
@@ -170,9 +174,37 @@ class Context:
             self._jobs[alias] = start_sweep(spec, ref.set, ref.name, self.logs / "sweeps",
                                             self.out / "sweeps", ref.workers)
 
+    def start_montecarlos(self) -> None:
+        """Start every Monte Carlo the claims use in the background (each its own process and
+        Dask cluster; the samples whose records are kept are not run again)."""
+        from pipeline.montecarlo.background import start_montecarlo
+
+        for alias in needed_montecarlos(self.cf):
+            ref = self.cf.montecarlo[alias]
+            self._mc_jobs[alias] = start_montecarlo(
+                montecarlo_path(self.cf, ref), ref.samples, self.logs / "montecarlo",
+                self.out / "montecarlo", ref.workers)
+        for alias in needed_montecarlos(self.cf, "power"):
+            ref = self.cf.power[alias]
+            self._mc_jobs[f"power:{alias}"] = start_montecarlo(
+                montecarlo_path(self.cf, ref), None, self.logs / "power", self.out / "power",
+                ref.workers, stage="power")
+
     def stop_sweeps(self) -> None:
-        for job in self._jobs.values():
+        for job in [*self._jobs.values(), *self._mc_jobs.values()]:
             job.stop()
+
+    def montecarlo(self, alias: str, kind: str = "montecarlo") -> tuple[dict, dict]:
+        """The verdict of a Monte Carlo (or the result of a power study) of the claims."""
+        job = alias if kind == "montecarlo" else f"{kind}:{alias}"
+        if job not in self._montecarlos:
+            from pipeline.montecarlo.background import finish_montecarlo, finish_power
+
+            finish = finish_montecarlo if kind == "montecarlo" else finish_power
+            verdict, prov, files = finish(self._mc_jobs[job])
+            self._montecarlos[job] = (verdict, prov)
+            self.files += files
+        return self._montecarlos[job]
 
     def sweep(self, alias: str) -> tuple[dict, dict]:
         if alias not in self._sweeps:
@@ -196,6 +228,10 @@ class Context:
             alias, _, key = path.partition(".")
             bracket, prov = self.sweep(alias)
             return dig(bracket, key, f"the stability bracket of sweep {alias}"), prov
+        if source in ("montecarlo", "power"):
+            alias, _, key = path.partition(".")
+            verdict, prov = self.montecarlo(alias, source)
+            return dig(verdict, key, f"the {source} result {alias}"), prov
         if source == "cross_check":
             cc = self.cross_check()
             prov = {"source": source, "version": cc["source_version"],
@@ -304,6 +340,7 @@ def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
     ctx = Context(cf, out)
     try:
         ctx.start_sweeps()
+        ctx.start_montecarlos()
         ctx.prepare()
         results = evaluate(cf, ctx)
     finally:

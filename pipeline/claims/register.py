@@ -15,7 +15,11 @@
 A metric is ``SOURCE:PATH``. SOURCE is a run name (PATH a dotted path into its analysis.json,
 or ``spec.…`` into its resolved spec, or ``log.GROUP.STAT`` for a statistic of its logged
 reduced velocity), ``cross_check``, ``baselines``, ``sweep`` (PATH: a name under ``sweeps:``
-then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``) or ``note`` (PATH:
+then a key of that sweep's stability bracket, e.g. ``sweep:dt.holds``), ``montecarlo`` (PATH: a
+name under ``montecarlo:`` then a key of its verdict, e.g. ``montecarlo:seed.lower_bound``),
+``power`` (PATH: a name under ``power:`` then a key of its detector-power result, e.g.
+``power:gyro.crossing.spectral``) or
+``note`` (PATH:
 ROW.COLUMN of the seed note's published values, the file named by ``note:``, e.g.
 ``note:dt_mu_max.nominal``). A threshold is a literal or ``{metric: SOURCE:PATH}``. The
 operator ``close`` holds when |value − threshold| ≤ rel_tol·|threshold| (``rel_tol`` given
@@ -24,7 +28,8 @@ wrote, imported by name (``{imported: NAME}``: ``<logs>/imported/NAME/run.parque
 ``controller: SPEC`` when its controller is declared); its PATHs are its record's
 (``ImportedRecord``): it has no spec but its robot and step, and no controller's columns.
 A file may ``extends:`` another
-(by path relative to itself): its ``runs`` and ``sweeps`` override the parent's by name, its
+(by path relative to itself): its ``runs``, ``sweeps`` and ``montecarlo`` override the
+parent's by name, its
 ``claims`` are added after the parent's.
 """
 
@@ -57,7 +62,7 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
 # /2: each claim carries its kind (physics, note, identity, software), which the reports read.
 CLAIMS_SCHEMA = "breve-claims/2"  # the version of the claims.json the register writes
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
-FIXED_SOURCES = ("cross_check", "baselines", "sweep", "note")
+FIXED_SOURCES = ("cross_check", "baselines", "sweep", "montecarlo", "power", "note")
 # v_breve is its task part; null_space a redundant arm's null-space velocities (eq. 37).
 LOG_GROUPS = {"omega_b": slice(0, 3), "nu_e_lin": slice(3, 6), "nu_e_ang": slice(6, 9),
               "camera_roll": slice(8, 9), "v_breve": slice(0, 9), "null_space": slice(9, None)}
@@ -144,11 +149,22 @@ class SweepRef(_Strict):
     unstable: Literal["above", "below"] = "above"
 
 
+class MonteCarloRef(_Strict):
+    """A Monte Carlo the claims use: ``python -m pipeline montecarlo FILE [--samples N]`` (a
+    path relative to the claims file, or a name under specs/montecarlo/)."""
+
+    file: str
+    samples: int | None = Field(default=None, gt=0)
+    workers: int = Field(default=2, gt=0)
+
+
 class ClaimsFile(_Strict):
     logs: str = "logs"
     note: str | None = None  # the seed note's values (seed_note.yaml), relative to here
     runs: dict[str, RunRef] = Field(default_factory=dict)
     sweeps: dict[str, SweepRef] = Field(default_factory=dict)
+    montecarlo: dict[str, MonteCarloRef] = Field(default_factory=dict)
+    power: dict[str, MonteCarloRef] = Field(default_factory=dict)  # samples: unused
     claims: list[Claim] = Field(min_length=1)
     source: str = ""
 
@@ -174,8 +190,8 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     if "note" in base and "note" not in data:  # the parent's note file, seen from here
         base["note"] = str((path.parent / str(parent)).resolve().parent / base["note"])
     merged = deep_merge(base, {k: v for k, v in data.items()
-                               if k not in ("claims", "runs", "sweeps")})
-    for key in ("runs", "sweeps"):  # an entry overrides the parent's by name, whole
+                               if k not in ("claims", "runs", "sweeps", "montecarlo", "power")})
+    for key in ("runs", "sweeps", "montecarlo", "power"):  # an entry overrides the parent's
         merged[key] = {**base.get(key, {}), **data.get(key, {})}
     merged["claims"] = list(base.get("claims", [])) + list(data.get("claims", []))
     return merged
@@ -257,6 +273,12 @@ def validate(cf: ClaimsFile, path: Path) -> None:
                     raise SpecError(f"{where}: unknown metric path {metric!r}: no sweep "
                                     f"{mpath.split('.')[0]!r} (sweeps: "
                                     f"{', '.join(cf.sweeps) or 'none'})")
+                for kind in ("montecarlo", "power"):
+                    refs = getattr(cf, kind)
+                    if source == kind and mpath.split(".")[0] not in refs:
+                        raise SpecError(f"{where}: unknown metric path {metric!r}: no {kind} "
+                                        f"{mpath.split('.')[0]!r} ({kind}: "
+                                        f"{', '.join(refs) or 'none'})")
 
 
 def note_path(cf: ClaimsFile, claims_path: Path | str) -> Path:
@@ -312,6 +334,12 @@ def needed_sweeps(cf: ClaimsFile) -> list[str]:
                               if source == "sweep"))
 
 
+def needed_montecarlos(cf: ClaimsFile, kind: str = "montecarlo") -> list[str]:
+    """The names under ``montecarlo:`` (or ``power:``) the claims use, in order of first use."""
+    return list(dict.fromkeys(path.partition(".")[0] for source, path in _metrics(cf)
+                              if source == kind))
+
+
 def needed_runs(cf: ClaimsFile) -> list[str]:
     """Run names the claims use, with the runs they are compared against, dependencies first."""
     used = list(dict.fromkeys(source for source, _ in _metrics(cf) if source in cf.runs))
@@ -350,4 +378,21 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
                 continue
             spec = load_spec(ref.spec, here)
             out[f"{kind} {name}"] = f"spec {spec.spec_hash}, robot {file_digest(spec.robot_path)}"
+    for name, ref in cf.montecarlo.items():
+        from pipeline.montecarlo.plan import montecarlo_key
+
+        out[f"montecarlo {name}"] = montecarlo_key(montecarlo_path(cf, ref), ref.samples)
+    for name, ref in cf.power.items():
+        from pipeline.montecarlo.power import power_file_key
+
+        out[f"power {name}"] = power_file_key(montecarlo_path(cf, ref))
     return out
+
+
+def montecarlo_path(cf: ClaimsFile, ref: MonteCarloRef) -> Path:
+    """A Monte Carlo file of the claims: beside the claims file, else under
+    specs/montecarlo/."""
+    from pipeline.montecarlo.plan import resolve_montecarlo
+
+    beside = Path(cf.source).resolve().parent / ref.file
+    return beside if beside.is_file() else resolve_montecarlo(ref.file)

@@ -26,6 +26,7 @@ SIM_ENTRY = ("pipeline.sim.run",)
 ANALYSIS_ENTRY = ("pipeline.analysis.stages", "pipeline.analysis.record")
 REPORT_ENTRY = ("pipeline.reports.render",)
 IMPORT_ENTRY = ("pipeline.importer.run",)
+SAMPLE_ENTRY = ("pipeline.montecarlo.sample", "pipeline.sim.run")
 IMPORT_LIBRARIES = ("numpy", "scipy", "pinocchio", "numba", "pyarrow", "pandas", "rosbags")
 TEMPLATES = PACKAGE_DIR / "reports" / "templates"
 
@@ -108,6 +109,13 @@ def sim_version() -> str:
 def analysis_version() -> str:
     """The key of an analysis' code: the analysis' sources and the numerical libraries."""
     return _digest(source_closure(ANALYSIS_ENTRY), library_versions(ANALYSIS_LIBRARIES))
+
+
+@cache
+def sample_version() -> str:
+    """The key of a Monte Carlo sample's record: the simulator's, the analysis stages' and the
+    sample's own sources, and the numerical libraries."""
+    return _digest(source_closure(SAMPLE_ENTRY), library_versions(ANALYSIS_LIBRARIES))
 
 
 @cache

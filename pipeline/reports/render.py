@@ -30,7 +30,7 @@ from pipeline.provenance.keys import report_version
 from pipeline.reports import figures as fg
 from pipeline.reports.fixes import decisions, fix_tables
 from pipeline.reports.mechanism import mechanism_context
-from pipeline.reports.templating import render
+from pipeline.reports.templating import rel, render
 from pipeline.store.door import ArtefactStore
 from pipeline.store.validity import REPORT_KEY_FILE, current_report, report_key
 from pipeline.verify.cross_check import CrossCheck, build_cross_check, write_cross_check_json
@@ -177,6 +177,7 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
             f"Power spectral density of the fastest damping mode's coordinate over the window "
             f"of {r.name} and of {comp.against}, with each run's Nyquist frequency: a "
             f"period-2 ripple is a peak at it."), partial(fg.mode_psd, r, against, styles=styles)))
+    jobs += montecarlo_figure_jobs(out)
     for table in sorted(Path(out).glob("sweeps/*/sweep.parquet")):
         name = table.parent.name
         if fg.sweep_key(table) == "robot.bus_inertia_scale":
@@ -191,6 +192,97 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
             f"Dominant lag-1 and dt·μ_max against mission.dt over sweep {name}; red squares are "
             "points above the bound 2, the dashed line dt*."), partial(fg.sweep_map, table)))
     return jobs, skipped
+
+
+def montecarlo_tables(out: Path) -> list[Path]:
+    """The Monte Carlo tables under ``out`` that have their verdict (a table without one is
+    unfinished: the command writes the verdict last)."""
+    return [t for t in sorted(Path(out).glob("montecarlo/*/montecarlo.parquet"))
+            if (t.parent / "verdict.json").is_file()]
+
+
+def _montecarlo_figures(table: Path) -> list[tuple[fg.Figure, Callable]]:
+    from pipeline.reports import montecarlo_figures as mf
+
+    name = table.parent.name
+    return [
+        (fg.Figure(f"figures/mc_{name}_ecdf.png", f"Least gain margin, Monte Carlo {name}",
+                   "The empirical distribution of each sample's least gain margin over its "
+                   "damping modes (eq. 35), with the requirement: the fraction left of the "
+                   "line misses it."), partial(mf.ecdf, table)),
+        (fg.Figure(f"figures/mc_{name}_params.png", f"Margins by parameter, Monte Carlo {name}",
+                   "Each sample's least gain, phase and delay margins (rows) against each "
+                   "dispersed parameter (columns), passing samples blue, failing red crosses, "
+                   "the requirement dashed."), partial(mf.parameters, table)),
+        (fg.Figure(f"figures/mc_{name}_map.png", f"Pass/fail map, Monte Carlo {name}",
+                   "Passing and failing samples over the two dispersed parameters the least "
+                   "gain margin follows most (Spearman's rank correlation)."),
+         partial(mf.pass_fail_map, table)),
+    ]
+
+
+def power_results(out: Path) -> list[Path]:
+    """The detector-power results under ``out`` (``power/<name>/power.json``)."""
+    return sorted(Path(out).glob("power/*/power.json"))
+
+
+def _power_figure(result: Path) -> tuple[fg.Figure, Callable]:
+    from pipeline.reports import montecarlo_figures as mf
+
+    name = result.parent.name
+    return (fg.Figure(f"figures/power_{name}.png", f"Detector power, {name}",
+                      "Left: each detector's missed detections on the mission that rings and "
+                      "false alarms on the one that does not, against the noise level (dotted: "
+                      "where the missed detections reach one half). Right: the ringing "
+                      "mission's ω_b period-2 amplitude as measured."),
+            partial(mf.detector_power, result))
+
+
+def montecarlo_figure_jobs(out: Path) -> list[tuple[fg.Figure, Callable]]:
+    return ([job for table in montecarlo_tables(out) for job in _montecarlo_figures(table)]
+            + [_power_figure(r) for r in power_results(out)])
+
+
+def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:
+    """One page per Monte Carlo (``montecarlo/<name>/montecarlo.{md,html}``), and the index's
+    entries (its verdict and its page)."""
+    from pipeline.montecarlo.verdict import read_verdict
+
+    drawn = {f.file for f in figs}
+    written, entries = [], []
+    for table in montecarlo_tables(out):
+        v = read_verdict(table.parent / "verdict.json")
+        own = [{"file": f"../../{f.file}", "title": f.title, "caption": f.caption}
+               for f, _ in _montecarlo_figures(table) if f.file in drawn]
+        ctx = {"v": v, "figures": own, "table": rel(table),
+               "verdict_file": rel(table.parent / "verdict.json"),
+               "code_version": report_version()}
+        folder = table.parent
+        written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
+                    render("montecarlo.html.j2", folder / "montecarlo.html", **ctx)]
+        entries.append({"v": v, "page": folder.relative_to(out).as_posix() + "/montecarlo.html"})
+    return written, entries
+
+
+def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:
+    """One page per detector-power study (``power/<name>/power.{md,html}``) and the index's
+    entries."""
+    from pipeline.montecarlo.power import read_power
+
+    drawn = {f.file for f in figs}
+    written, entries = [], []
+    for result in power_results(out):
+        r = read_power(result)
+        fig, _ = _power_figure(result)
+        own = ([{"file": f"../../{fig.file}", "title": fig.title, "caption": fig.caption}]
+               if fig.file in drawn else [])
+        ctx = {"r": r, "figures": own, "result": rel(result),
+               "code_version": report_version()}
+        written += [render("power.md.j2", result.parent / "power.md", **ctx),
+                    render("power.html.j2", result.parent / "power.html", **ctx)]
+        entries.append({"r": r, "page": result.parent.relative_to(out).as_posix()
+                        + "/power.html"})
+    return written, entries
 
 
 def sweep_files(out: Path) -> list[dict]:
@@ -222,6 +314,8 @@ def _remove_stale(out: Path, keep: set[Path]) -> None:
     """Reports of runs that no longer have an analysis, and figures not drawn this time."""
     stale = [p for p in out.glob("*/mechanism.*") if p not in keep]
     stale += [p for p in out.glob(f"{IMPORTED_FOLDER}/*/imported.*") if p not in keep]
+    stale += [p for p in [*out.glob("montecarlo/*/montecarlo.*"), *out.glob("power/*/power.*")]
+              if p not in keep and p.suffix in (".md", ".html")]
     stale += [p for p in (out / "figures").glob("*.png") if p not in keep]
     for p in stale:
         p.unlink(missing_ok=True)
@@ -256,9 +350,10 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     runs = load_runs(out)
     claims = read_claims_json(out / CLAIMS_FILE)
     sweep_tables = list(out.glob("sweeps/*/sweep.parquet"))
-    if not runs and not (out / IMPORTED_FOLDER).is_dir() and claims is None and not sweep_tables:
-        raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json or "
-                       f"sweeps/*/sweep.parquet")
+    if (not runs and not (out / IMPORTED_FOLDER).is_dir() and claims is None and not sweep_tables
+            and not montecarlo_tables(out) and not power_results(out)):
+        raise LogError(f"{out}: nothing to report: no */analysis.json, claims.json, "
+                       f"sweeps/*/sweep.parquet or montecarlo/*/verdict.json")
     imported = load_imported(out)
     jobs, skipped = figure_jobs(out, runs, imported)
     # The figures are drawn on two processes while this one checks the equations against the
@@ -289,6 +384,9 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
             why = fut.result()
             figs += [] if why else [fig]
             skipped += [f"{fig.title}: {why}"] if why else []
+    mc_written, montecarlos = render_montecarlo(out, figs)
+    power_written, powers = render_power(out, figs)
+    written += mc_written + power_written
     fig_files = {f.file for f in figs}
     for m in mechanisms:
         m["eig"] = f"figures/eig_{m['run'].folder}.png" in fig_files
@@ -301,7 +399,8 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
                    imported=imported, tables=tables, decisions=decisions(runs),
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,
-                   pages=pages, sweeps=sweeps, code_version=report_version())
+                   pages=pages, sweeps=sweeps, montecarlos=montecarlos, powers=powers,
+                   code_version=report_version())
     for s in skipped:
         print(f"note: {s}", file=sys.stderr)
     atomic_write_text(out / KEY_FILE, key)  # last: a rendering cut short is redone

@@ -37,19 +37,16 @@ from pipeline.sim.control_step import (
     step_layout,
     task_error_terms,
 )
+from pipeline.sim.forward_dynamics import rigid_tree
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import breve_bounds
 from pipeline.sim.linalg import matvec
 from pipeline.sim.margins import Requirement, RequirementFix, gain_margin, requirement_fixes
-from pipeline.sim.plant import (
-    attitude_excursion,
-    held_command,
-    integrate_held,
-    limit_bus_torque,
-)
+from pipeline.sim.plant import held_command, integrate_held, limit_bus_torque
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.robot_file import check_null_space
 from pipeline.sim.rotations import quat_from_matrix
+from pipeline.sim.sensors import Measurement
 from pipeline.sim.stability import (
     bisect_critical_step,
     critical_step,
@@ -115,7 +112,12 @@ class Mission:
         self._zero_q = np.zeros(self.robot.model.nq)
         # The sampled-data plant's own Pinocchio data and its held command (eq. 29).
         self._plant_data = self.robot.model.createData()
+        self._tree = rigid_tree(self.robot.model)  # the compiled plant's model (eq. 29)
         self._held: np.ndarray | None = None
+        # The sampled plant's own state, which the controller sees through its sensors
+        # (eq. 40); None: the state the controller holds (no sensors, or the first step).
+        self._true: tuple[np.ndarray, np.ndarray] | None = None
+        self._sensors: Measurement | None = None
         q_start = self.robot.start_configuration()
         T0 = self.robot.terms(q_start, np.zeros(self.robot.model.nv), dynamics=False)
         self.guidance = BaseGuidance(spec.guidance, T0.p_e - T0.p_c, T0.R_te[:, 0])
@@ -133,9 +135,12 @@ class Mission:
         nv = self.robot.model.nv
         T0 = self.robot.terms(self.q0, np.zeros(nv), dynamics=False)
         v_c0 = self.v_c0.copy()
-        n_breve = self.robot.shape.n_breve
-        v0 = matvec(T0.gamma_inv, np.concatenate([v_c0, np.zeros(n_breve)]))
-        return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=np.zeros(n_breve))
+        # The bus's rate at the start (mission.initial_omega_b; zero: at rest): ω_b is v̆'s
+        # first block (eq. 13), the arm still relative to the bus.
+        v_breve0 = np.zeros(self.robot.shape.n_breve)
+        v_breve0[0:3] = self.spec.mission.initial_omega_b
+        v0 = matvec(T0.gamma_inv, np.concatenate([v_c0, v_breve0]))
+        return LoopState(q=self.q0.copy(), v=v0, v_c=v_c0, v_breve=v_breve0)
 
     def critical_steps(self, s: LoopState) -> tuple[float, float | None]:
         """(dt*_damping, dt*_map) at state ``s`` for the spec's integrator (eq. 24): 2/μ_max,
@@ -201,8 +206,9 @@ class Mission:
         finite."""
         robot, ref, at = self.robot, self._reference, self.layout.state
         sampled = self.spec.mission.plant.model == "sampled"
-        if sampled:  # what the plant is at: (q_k, v_k)
-            q_k, v_k = state[at["q"]].copy(), state[at["v"]].copy()
+        if sampled:  # what the plant is at: (q_k, v_k), not what its sensors read
+            q_k, v_k = (self._true if self._true is not None else
+                        (state[at["q"]].copy(), state[at["v"]].copy()))
         inputs = robot.dynamics_inputs(state[at["q"]], state[at["v"]])
         self.guidance.reference_into(ref, float(state[at["tau"].start]), inputs.p_b)
         finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage,
@@ -232,15 +238,23 @@ class Mission:
             tau, self._held = self._held, tau
         tau, _ = limit_bus_torque(tau, plant.bus_torque_max)
         row[row_at["u_applied"]] = tau
-        path: list[np.ndarray] = []
-        q, v = integrate_held(model, data, q_k, v_k, tau, self.dt, plant.substeps, path)
+        q, v, excursion = integrate_held(self._tree, q_k, v_k, tau, self.dt, plant.substeps)
         if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
             return False
-        row[row_at["attitude_excursion_deg"].start] = math.degrees(attitude_excursion(q_k, path))
+        row[row_at["attitude_excursion_deg"].start] = math.degrees(excursion)
+        if self._sensors is not None:  # the controller's view of the plant (eq. 40)
+            self._true = (q, v)
+            q, v = self._sensors.measure(q, v)
         nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
         state[at["q"]], state[at["v"]], state[at["v_c"]], state[at["v_breve"]] = (
             q, v, nu[:3], nu[3:])
         return True
+
+    def _start_sensors(self) -> None:
+        """A fresh plant state and sensor stream (eq. 40) for a run or a single step."""
+        sensors = self.spec.mission.plant.sensors
+        self._true = None
+        self._sensors = None if sensors is None else Measurement(sensors, self.dt)
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
@@ -253,6 +267,7 @@ class Mission:
             "v_breve_des_prev": (np.zeros(s.v_breve.size) if s.v_breve_des_prev is None
                                  else s.v_breve_des_prev)})
         rows = np.zeros((1, layout.row_size))
+        self._start_sensors()
         self._advance(0, state, rows, self.controller_vector(),
                       CoverageCounter.start(self.target, self.spec.camera))
         f = {name: state[sl].copy() for name, sl in layout.state.items()}
@@ -298,6 +313,7 @@ class Mission:
         coverage = CoverageCounter.start(self.target, self.spec.camera)
         explicit = self.spec.controller.integrator == "explicit"
         self._held = None  # a run starts with no command held (eq. 29)
+        self._start_sensors()
         warned: list[str] = []
         # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
         # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
@@ -318,7 +334,8 @@ class Mission:
                 i = k - first
                 try:
                     finite = self._advance(i, state, rows, ctrl, coverage)
-                except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+                except (np.linalg.LinAlgError, FloatingPointError, ValueError,
+                        ZeroDivisionError) as exc:  # a compiled kernel divides by zero
                     finite, why = False, f"{type(exc).__name__}: {exc}"
                 else:
                     why = "non-finite state"

@@ -10,12 +10,13 @@ order hold) while the plant moves continuously. ``mission.plant.model: sampled``
     τ_k = M(q_k) a_k + C(q_k, v_k) v_k       its generalized force at the sampled state (RNEA)
     M(q) v̇ + C(q, v) v = τ_{k−d}  on [t_k, t_k + dt]     d = mission.plant.delay_steps ∈ {0, 1}
 
-integrated by classical Runge–Kutta (RK4) in ``substeps`` steps on the configuration's 13
+integrated by classical Runge–Kutta (RK4) in ``substeps`` steps on the configuration's 7 + n
 numbers (the bus position, its unit quaternion and the joint angles, whose rates are
-:func:`configuration_rate`), the forward dynamics by Pinocchio's ABA. The next step's
-controller measures the plant: ν = Γ(q) v.
+:func:`configuration_rate`), the forward dynamics by the compiled articulated-body algorithm
+(:mod:`pipeline.sim.forward_dynamics`): the whole step's motion is one kernel call, no Python
+per substep. The next step's controller measures the plant: ν = Γ(q) v.
 
-τ is the bus wrench and the six joint torques (the free flyer's 6 and the arm's 6 entries of
+τ is the bus wrench and the joint torques (the free flyer's 6 and the arm's n entries of
 the generalized force, in Pinocchio's convention). For one rigid body spinning about a
 principal axis under a held torque −D ω_k, the hold is exact: ω_{k+1} = (1 − dt·D/I) ω_k, the
 forward-Euler map of eq. 23, so a damping mode with dt·μ > 2 rings in the sampled-data loop
@@ -27,9 +28,12 @@ loop's own limits bound accelerations.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
+from pipeline.sim.forward_dynamics import RigidTree, forward_dynamics
 from pipeline.sim.jit import jit
 from pipeline.sim.linalg import matvec
 
@@ -53,36 +57,38 @@ def held_command(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
     return pin.rnea(model, data, q, v, a).copy()
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of two 3-vectors: NumPy's np.cross costs ~10 µs of axis handling per call, and
-    the RK4 stages call it a hundred times a step; same products and differences, same bits."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
+@jit
 def configuration_rate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """q̇ of Pinocchio's free-flyer configuration (13 numbers on a robot of six joints) for the
-    velocity v (eq. 1):
+    """q̇ of Pinocchio's free-flyer configuration (7 + n numbers) for the velocity v (eq. 1):
     ṗ_b = R_tb v_b = v_b + 2w (ε × v_b) + 2ε × (ε × v_b) (v_b in the bus frame, the unit
     quaternion (ε, w), ε = (x, y, z)), its rate (ε̇, ẇ) = ½ [w ω + ε × ω ; −ε·ω] (ω in the bus
     frame), q̇_a = v[6:].
     """
     w = q[6]
-    eps, vb, om = q[3:6], v[0:3], v[3:6]
-    t = _cross(eps, vb)
-    dq = np.empty(len(q))
-    dq[0:3] = vb + 2.0 * w * t + 2.0 * _cross(eps, t)
-    dq[3:6] = 0.5 * (w * om + _cross(eps, om))
-    dq[6] = -0.5 * (eps @ om)
-    dq[7:] = v[6:]
+    e0, e1, e2 = q[3], q[4], q[5]
+    t0 = e1 * v[2] - e2 * v[1]
+    t1 = e2 * v[0] - e0 * v[2]
+    t2 = e0 * v[1] - e1 * v[0]
+    dq = np.empty(q.size)
+    dq[0] = v[0] + 2.0 * w * t0 + 2.0 * (e1 * t2 - e2 * t1)
+    dq[1] = v[1] + 2.0 * w * t1 + 2.0 * (e2 * t0 - e0 * t2)
+    dq[2] = v[2] + 2.0 * w * t2 + 2.0 * (e0 * t1 - e1 * t0)
+    dq[3] = 0.5 * (w * v[3] + (e1 * v[5] - e2 * v[4]))
+    dq[4] = 0.5 * (w * v[4] + (e2 * v[3] - e0 * v[5]))
+    dq[5] = 0.5 * (w * v[5] + (e0 * v[4] - e1 * v[3]))
+    dq[6] = -0.5 * (e0 * v[3] + e1 * v[4] + e2 * v[5])
+    for i in range(7, q.size):
+        dq[i] = v[i - 1]
     return dq
 
 
+@jit
 def _normalised(q: np.ndarray) -> np.ndarray:
-    q = q.copy()
-    q[3:7] /= np.linalg.norm(q[3:7])
-    return q
+    out = q.copy()
+    n = math.sqrt(q[3] * q[3] + q[4] * q[4] + q[5] * q[5] + q[6] * q[6])
+    for i in range(3, 7):
+        out[i] = q[i] / n
+    return out
 
 
 def limit_bus_torque(tau: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
@@ -96,46 +102,80 @@ def limit_bus_torque(tau: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
     return out, True
 
 
-def integrate_held(model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray,
-                   tau: np.ndarray, dt: float, substeps: int,
-                   path: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(q, v) after dt under the held generalized force τ (eq. 29): classical RK4 in
-    ``substeps`` steps on (q, v) ∈ R¹³ × R¹², q̇ from :func:`configuration_rate` and v̇ from
-    Pinocchio's ABA, each stage's quaternion normalised before it is used and the result's
-    after each step (the ODE keeps |quat| = 1; RK4 drifts from it by O(h⁵) per step).
-    With ``path``, each substep's q is appended to it."""
+@jit
+def integrate_held(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
+                   dt: float, substeps: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """(q, v) after dt under the held generalized force τ (eq. 29), and the bus attitude's
+    excursion over the step (:func:`attitude_excursion`): classical RK4 in ``substeps`` steps
+    on (q, v), q̇ from :func:`configuration_rate` and v̇ from the compiled articulated-body
+    algorithm (:func:`pipeline.sim.forward_dynamics.forward_dynamics`), each stage's
+    quaternion normalised before it is used and the result's after each step (the ODE keeps
+    |quat| = 1; RK4 drifts from it by O(h⁵) per step)."""
     h = dt / substeps
-
-    def rates(qs: np.ndarray, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        qs = _normalised(qs)
-        return configuration_rate(qs, vs), pin.aba(model, data, qs, vs, tau).copy()
-
-    for _ in range(substeps):
-        dq1, dv1 = rates(q, v)
-        dq2, dv2 = rates(q + 0.5 * h * dq1, v + 0.5 * h * dv1)
-        dq3, dv3 = rates(q + 0.5 * h * dq2, v + 0.5 * h * dv2)
-        dq4, dv4 = rates(q + h * dq3, v + h * dv3)
+    path = np.empty((substeps, 4))
+    start = _normalised(q)[3:7]
+    for k in range(substeps):
+        q1 = _normalised(q)
+        dq1, dv1 = configuration_rate(q1, v), forward_dynamics(tree, q1, v, tau)
+        q2 = _normalised(q + 0.5 * h * dq1)
+        v2 = v + 0.5 * h * dv1
+        dq2, dv2 = configuration_rate(q2, v2), forward_dynamics(tree, q2, v2, tau)
+        q3 = _normalised(q + 0.5 * h * dq2)
+        v3 = v + 0.5 * h * dv2
+        dq3, dv3 = configuration_rate(q3, v3), forward_dynamics(tree, q3, v3, tau)
+        q4 = _normalised(q + h * dq3)
+        v4 = v + h * dv3
+        dq4, dv4 = configuration_rate(q4, v4), forward_dynamics(tree, q4, v4, tau)
         q = _normalised(q + h / 6.0 * (dq1 + 2.0 * dq2 + 2.0 * dq3 + dq4))
         v = v + h / 6.0 * (dv1 + 2.0 * dv2 + 2.0 * dv3 + dv4)
-        if path is not None:
-            path.append(q)
-    return q, v
+        path[k] = q[3:7]
+    return q, v, attitude_excursion(start, path)
 
 
-def attitude_excursion(q_start: np.ndarray, path: list[np.ndarray]) -> float:
-    """The largest angle (rad) between the bus attitude along ``path`` (the configurations at
-    equal substeps of one control step, the last at its end) and the geodesic from the
-    step's first attitude to its last (eqs. 29, 32): the motion between two control instants
-    that the instants do not see. A rotation at constant rate, as the update of eq. 15
-    makes, has none; under a held torque about a principal axis the rate ramps from ω_k to
-    ω_{k+1} and the excursion is |ω_{k+1} − ω_k| dt/8, at mid-step."""
-    def rotation(qs: np.ndarray) -> np.ndarray:
-        return pin.Quaternion(qs[6], qs[3], qs[4], qs[5]).normalized().toRotationMatrix()
+@jit
+def _quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a ⊗ b of quaternions (x, y, z, w) (Hamilton's product)."""
+    out = np.empty(4)
+    out[0] = a[3] * b[0] + b[3] * a[0] + a[1] * b[2] - a[2] * b[1]
+    out[1] = a[3] * b[1] + b[3] * a[1] + a[2] * b[0] - a[0] * b[2]
+    out[2] = a[3] * b[2] + b[3] * a[2] + a[0] * b[1] - a[1] * b[0]
+    out[3] = a[3] * b[3] - (a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+    return out
 
-    R0 = rotation(q_start)
-    chord = pin.log3(R0.T @ rotation(path[-1]))
+
+@jit
+def _conjugate(a: np.ndarray) -> np.ndarray:
+    return np.array([-a[0], -a[1], -a[2], a[3]])
+
+
+@jit
+def _angle(a: np.ndarray) -> float:
+    """The rotation angle in [0, π] of the unit quaternion a: 2 atan2(|ε|, |w|)."""
+    return 2.0 * math.atan2(math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]), abs(a[3]))
+
+
+@jit
+def attitude_excursion(q_start: np.ndarray, path: np.ndarray) -> float:
+    """The largest angle (rad) between the bus attitude along ``path`` (the unit quaternions
+    (x, y, z, w) at equal substeps of one control step, the last at its end) and the geodesic
+    from the step's first attitude ``q_start`` to its last (eqs. 29, 32): the motion between
+    two control instants that the instants do not see. A rotation at constant rate, as the
+    update of eq. 15 makes, has none; under a held torque about a principal axis the rate
+    ramps from ω_k to ω_{k+1} and the excursion is |ω_{k+1} − ω_k| dt/8, at mid-step."""
+    n = path.shape[0]
+    rel = _quat_product(_conjugate(q_start), path[n - 1])
+    if rel[3] < 0.0:  # the shorter way round
+        rel = -rel
+    s = math.sqrt(rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2])
+    theta = 2.0 * math.atan2(s, rel[3])
     worst = 0.0
-    for j, qs in enumerate(path[:-1], start=1):
-        R_geo = R0 @ pin.exp3(chord * (j / len(path)))
-        worst = max(worst, float(np.linalg.norm(pin.log3(R_geo.T @ rotation(qs)))))
+    for j in range(1, n):
+        half = 0.5 * theta * j / n
+        step = np.zeros(4)
+        step[3] = math.cos(half)
+        if s > 0.0:
+            for i in range(3):
+                step[i] = rel[i] / s * math.sin(half)
+        geodesic = _quat_product(q_start, step)
+        worst = max(worst, _angle(_quat_product(_conjugate(geodesic), path[j - 1])))
     return worst

@@ -26,6 +26,7 @@ import pinocchio as pin
 
 from pipeline.errors import SpecError
 from pipeline.shapes import MAX_JOINTS, TASK_DOF, RobotShape
+from pipeline.sim.inertial import set_inertial
 from pipeline.sim.robot_crosscheck import crosscheck_robot_file
 from pipeline.spec import Spec
 
@@ -94,7 +95,8 @@ def _stderr_of_c_code() -> Iterator[Callable[[], list[str]]]:
 def load_robot_model(path: Path | str, camera_frame: str,
                      bus_inertia_scale: float = 1.0,
                      package_dirs: tuple[Path, ...] = (),
-                     locked_joints: Mapping[str, float] | None = None) -> pin.Model:
+                     locked_joints: Mapping[str, float] | None = None,
+                     inertial: Mapping | None = None) -> pin.Model:
     """The Pinocchio model of a robot file, gravity off, validated (eq. 1).
 
     The file's joints named in ``locked_joints`` are held at the given values (Pinocchio's
@@ -102,9 +104,11 @@ def load_robot_model(path: Path | str, camera_frame: str,
     the chain from the bus to the camera frame (:func:`arm_joints`). The parse is
     cross-checked against MuJoCo's (:func:`crosscheck_robot_file`, on the file as written:
     meshes are needed only for a body whose inertia comes from them, ``package://`` URIs are
-    looked for in ``package_dirs``) before the locks and before ``bus_inertia_scale``
-    multiplies the rotational inertia of the rigid body on the free joint about its own centre
-    of mass (its mass and centre of mass stay): the check is about the file.
+    looked for in ``package_dirs``) before the locks, before ``inertial`` replaces the bus's
+    or the payload's inertial parameters (:func:`pipeline.sim.inertial.set_inertial`, eq. 39)
+    and before ``bus_inertia_scale`` multiplies the rotational inertia of the rigid body on
+    the free joint about its own centre of mass (its mass and centre of mass stay): the check
+    is about the file.
     """
     path = Path(path)
     model = _parse(path)
@@ -118,6 +122,8 @@ def load_robot_model(path: Path | str, camera_frame: str,
     crosscheck_robot_file(path, model, camera_frame, package_dirs)
     model = reduced
     model.gravity.setZero()
+    if inertial:
+        set_inertial(model, inertial, camera_frame_id(model, camera_frame, path), path)
     if bus_inertia_scale != 1.0:
         bus = model.inertias[1]
         model.inertias[1] = pin.Inertia(bus.mass, bus.lever.copy(),
@@ -249,7 +255,7 @@ def load_spec_robot(spec: Spec) -> pin.Model:
     :func:`check_null_space`), and ``robot.q_bar`` one angle per arm joint."""
     model = load_robot_model(spec.robot_path, spec.robot.camera_frame,
                              spec.robot.bus_inertia_scale, spec.package_dirs,
-                             spec.robot.locked_joints)
+                             spec.robot.locked_joints, spec.robot.inertial)
     shape = robot_shape(model)
     if shape.n > MAX_JOINTS:
         raise SpecError(f"{spec.robot_path}: {shape.n} arm joints ({', '.join(shape.joints)}): "

@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,22 +93,22 @@ def _failed_record(point: Point, error: str) -> dict:
             "spec_hash": point.spec.spec_hash, "log": "", **figures(None)}
 
 
-def _outcome(fut, point: Point, why_cancelled: str) -> dict:
+def _outcome(fut, name: str, failed: Callable, why_cancelled: str) -> dict:
     """The record of a completed future. A ``lost`` one (its worker died, at a walltime say,
     between finishing and our taking the result) is computed again by Dask: wait for it."""
     from distributed.client import FutureCancelledError
 
+    cancelled = ("task cancelled: "
+                 f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
     if fut.status == "cancelled":
-        return _failed_record(point, "task cancelled: "
-                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+        return failed(name, cancelled)
     try:
         return fut.result()
     except FutureCancelledError:
-        return _failed_record(point, "task cancelled: "
-                              f"{why_cancelled or 'the scheduler was lost or the sweep stopped'}")
+        return failed(name, cancelled)
     except Exception as exc:  # a bug, or KilledWorker: its workers died too many times
         text = str(exc).splitlines()[0] if str(exc) else ""
-        return _failed_record(point, f"{type(exc).__name__}: {text}")
+        return failed(name, f"{type(exc).__name__}: {text}")
 
 
 class _Watchdog(threading.Thread):
@@ -143,36 +144,57 @@ class _Watchdog(threading.Thread):
 
 def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float = 300.0,
             jobs=None) -> list[dict]:
-    """Submit one task per point and collect the records as they complete (grid order).
+    """Submit one task per point and collect the records as they complete (grid order);
+    see :func:`execute_tasks`."""
+    points = {p.name: p for p in sweep.points}
+
+    def submit(name: str, topic: str, key: str):
+        return client.submit(sweep_task, points[name].spec, str(sweep.log_dir), topic,
+                             pure=False, key=key)
+
+    return execute_tasks(sweep.name, list(points), submit,
+                         lambda name, error: _failed_record(points[name], error),
+                         lambda rec: rec["status"] == "complete", client, progress,
+                         worker_timeout, jobs)
+
+
+def execute_tasks(title: str, names: list[str], submit: Callable, failed: Callable,
+                  ok: Callable[[dict], bool], client, progress: bool = False,
+                  worker_timeout: float = 300.0, jobs=None, kind: str = "sweep",
+                  unit: str = "point") -> list[dict]:
+    """Submit one task per name (``submit(name, topic, key)`` returns its future) and collect
+    the records as they complete, in the order of ``names``; a task that raised, was cancelled
+    or whose workers died gets ``failed(name, error)``; ``ok(record)`` counts it done or
+    failed in the progress.
 
     Each record gets ``attempts``, the starts of its task that the driver saw (more than
-    one: a worker died or retired under it and Dask ran it again), and for a task the
+    one: a worker died or retired under it and Dask ran it again; tasks announce their start
+    on the topic, :func:`pipeline.sweep.progress.announce_start`), and for a task the
     scheduler gave up on (KilledWorker) the starts its rule implies."""
     from distributed import as_completed
 
     tag = uuid.uuid4().hex[:8]
     topic = f"breve-sweep-{tag}"
-    shown = Progress(sweep.name, len(sweep.points), terminal=progress)
-    tracker = Tracker([p.name for p in sweep.points], shown)
+    shown = Progress(title, len(names), terminal=progress, kind=kind, unit=unit)
+    tracker = Tracker(names, shown)
     client.subscribe_topic(topic, tracker.started)
-    futures = {client.submit(sweep_task, p.spec, str(sweep.log_dir), topic, pure=False,
-                             key=f"sweep-{p.name}-{tag}"): p for p in sweep.points}
+    futures = {submit(name, topic, f"{kind}-{name}-{tag}"): name for name in names}
     pending = set(futures)
     watchdog = _Watchdog(client, pending, worker_timeout, jobs)
     watchdog.start()
     records: dict[str, dict] = {}
     try:
         for fut in as_completed(list(futures), loop=client.loop):
-            point = futures.pop(fut)
-            rec = _outcome(fut, point, watchdog.reason)
+            name = futures.pop(fut)
+            rec = _outcome(fut, name, failed, watchdog.reason)
             # Release the result at once: a result the client still refers to is recomputed
-            # when the worker holding it dies or retires (a walltime), so every finished point
+            # when the worker holding it dies or retires (a walltime), so every finished task
             # would run again each time a job ends.
             pending.discard(fut)
             fut.release()
             rec["received"] = time.perf_counter()  # for the throughput (not in the table)
-            records[rec["point"]] = rec
-            tracker.finished(rec["point"], rec["status"] == "complete")
+            records[name] = rec
+            tracker.finished(name, ok(rec))
     except BaseException:
         client.cancel(list(pending))  # what is queued never starts
         raise
@@ -181,14 +203,14 @@ def execute(sweep: Sweep, client, progress: bool = False, worker_timeout: float 
         shown.close()
         with suppress(Exception):
             client.unsubscribe_topic(topic)
-    for p in sweep.points:
+    for name in names:
         # The starts the driver saw; a start announced by a worker killed at once may never
         # arrive (under load). A KilledWorker is the scheduler's own count: the task's worker
         # died ALLOWED_FAILURES + 1 times, so it started that often.
-        seen = tracker.attempts(p.name)
-        killed = str(records[p.name].get("error", "")).startswith("KilledWorker")
-        records[p.name]["attempts"] = max(seen, ALLOWED_FAILURES + 1) if killed else seen
-    return [records[p.name] for p in sweep.points]
+        seen = tracker.attempts(name)
+        killed = str(records[name].get("error", "")).startswith("KilledWorker")
+        records[name]["attempts"] = max(seen, ALLOWED_FAILURES + 1) if killed else seen
+    return [records[name] for name in names]
 
 
 def run_sweep(sweep: Sweep, client, progress: bool = False, worker_timeout: float = 300.0,

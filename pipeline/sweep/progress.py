@@ -75,11 +75,12 @@ class Tracker:
 class Progress:
     """A tqdm bar on a terminal, else one line on ``stream`` per change of the counts."""
 
-    def __init__(self, name: str, total: int, terminal: bool, stream=None) -> None:
-        self.name, self.total = name, total
+    def __init__(self, name: str, total: int, terminal: bool, stream=None,
+                 kind: str = "sweep", unit: str = "point") -> None:
+        self.name, self.total, self.kind = name, total, kind
         self.stream = stream or sys.stderr
         self.last: tuple[int, int, int] | None = None
-        self.bar = (tqdm(total=total, unit="point", desc=name, file=self.stream)
+        self.bar = (tqdm(total=total, unit=unit, desc=name, file=self.stream)
                     if terminal else None)
 
     def show(self, done: int, failed: int, running: int) -> None:
@@ -94,7 +95,7 @@ class Progress:
             self.bar.update(done + failed - prev[0] - prev[1])
             self.bar.refresh()
         else:
-            print(f"sweep {self.name}: {done + failed}/{self.total} finished "
+            print(f"{self.kind} {self.name}: {done + failed}/{self.total} finished "
                   f"({done} done, {failed} failed), {running} running",
                   file=self.stream, flush=True)
 

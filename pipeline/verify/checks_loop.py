@@ -321,23 +321,52 @@ def _commanded_force() -> Outcome:
 def _attitude_excursion() -> Outcome:
     import pinocchio as pin
 
-    from pipeline.sim.plant import attitude_excursion, integrate_held
+    from pipeline.sim.forward_dynamics import rigid_tree
+    from pipeline.sim.plant import integrate_held
 
     body = pin.Model()
     jid = body.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "free")
     body.appendBodyToJoint(jid, pin.Inertia(5.0, np.zeros(3), np.diag([0.008, 0.02, 0.015625])),
                            pin.SE3.Identity())
     body.gravity.setZero()
-    data, dt = body.createData(), 0.03
+    tree, dt = rigid_tree(body), 0.03
     q0 = pin.neutral(body)
     diffs = []
     for w, torque in ((0.15, -0.15625), (0.3, 0.0)):
         v0 = np.array([0, 0, 0, 0, 0, w])
-        path: list[np.ndarray] = []
-        _, v1 = integrate_held(body, data, q0, v0, np.r_[np.zeros(5), torque], dt, 8, path)
-        diffs.append(abs(attitude_excursion(q0, path) - abs(v1[5] - w) * dt / 8))
+        _, v1, excursion = integrate_held(tree, q0, v0, np.r_[np.zeros(5), torque], dt, 8)
+        diffs.append(abs(excursion - abs(v1[5] - w) * dt / 8))
     return Outcome("a 5 kg body about z: ω from 0.15 rad/s under −0.156 N·m, and at 0.3 rad/s "
                    "under none, 8 substeps", max(diffs), 1e-12, "rad")
+
+
+@check("29", "the compiled articulated-body algorithm's v̇ vs Pinocchio's aba at random states "
+       "and forces of the seed robot, the servicer and the 7-joint Panda",
+       "pipeline.sim.forward_dynamics.forward_dynamics", "pipeline.sim.forward_dynamics.rigid_tree")
+def _forward_dynamics() -> Outcome:
+    import pinocchio as pin
+
+    from pipeline.sim.forward_dynamics import forward_dynamics, rigid_tree
+    from pipeline.sim.robot_file import load_spec_robot
+    from pipeline.spec import load_spec
+
+    g = rng(2929)
+    worst = 0.0
+    for name in ("nominal", "servicer_nominal", "panda_nominal"):
+        model = load_spec_robot(load_spec(name))
+        data, tree = model.createData(), rigid_tree(model)
+        for _ in range(5):
+            q = pin.neutral(model)
+            q[:3] = g.standard_normal(3)
+            quat = g.standard_normal(4)
+            q[3:7] = quat / np.linalg.norm(quat)
+            q[7:] = g.uniform(-np.pi, np.pi, model.nq - 7)
+            v, tau = g.standard_normal(model.nv), g.standard_normal(model.nv)
+            ref = pin.aba(model, data, q, v, tau)
+            worst = max(worst, maxdiff(forward_dynamics(tree, q, v, tau), ref)
+                        / float(np.max(np.abs(ref))))
+    return Outcome("5 random states and forces of each of 3 robots (6 and 7 joints)", worst,
+                   1e-12, "relative to max |v̇|")
 
 
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
@@ -349,6 +378,7 @@ def _attitude_excursion() -> Outcome:
 def _held_command() -> Outcome:
     import pinocchio as pin
 
+    from pipeline.sim.forward_dynamics import rigid_tree
     from pipeline.sim.plant import held_command, integrate_held
 
     body = pin.Model()
@@ -356,12 +386,12 @@ def _held_command() -> Outcome:
     jid = body.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "free")
     body.appendBodyToJoint(jid, pin.Inertia(5.0, np.zeros(3), inertia), pin.SE3.Identity())
     body.gravity.setZero()
-    data = body.createData()
+    tree = rigid_tree(body)
     q, v, dt, D = pin.neutral(body), np.array([0, 0, 0, 0, 0, 0.15]), 0.03, 2.0
     tau = np.r_[np.zeros(5), -D * v[5]]
     diffs = []
     for _ in range(3):
-        q, v_next = integrate_held(body, data, q, v, tau, dt, 20)
+        q, v_next, _ = integrate_held(tree, q, v, tau, dt, 20)
         diffs.append(abs(v_next[5] - (1 - dt * D / inertia[2, 2]) * v[5]) / abs(v[5]))
         v = v_next
         tau = np.r_[np.zeros(5), -D * v[5]]
@@ -394,6 +424,7 @@ CHECKS = (
     _guidance,
     _coverage,
     _held_command,
+    _forward_dynamics,
     _commanded_force,
     _attitude_excursion,
 )

@@ -1,0 +1,188 @@
+"""``python -m pipeline montecarlo FILE``: draw the samples, run them on Dask, write the table
+and the verdict; ``--sample I`` runs one sample alone and writes its log (eqs. 38, 39)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from pathlib import Path
+
+from pipeline.atomic_files import atomic_write_text
+from pipeline.errors import RunFailed
+from pipeline.montecarlo.dispersions import Dispersion
+from pipeline.montecarlo.plan import MonteCarlo, plan_montecarlo
+from pipeline.montecarlo.task import cached_record, errored_record, sample_task
+from pipeline.montecarlo.verdict import (
+    TABLE_NAME,
+    VERDICT_NAME,
+    MonteCarloVerdict,
+    RequirementWords,
+    judge,
+    make_table,
+    verdict_json,
+    write_table,
+)
+from pipeline.provenance.keys import sample_version
+
+
+def describe(d: Dispersion) -> str:
+    """A dispersion in words, for the table of the report."""
+    if d.dist == "choice":
+        return f"one of {', '.join(f'{v:g}' for v in d.values)}, equally likely"
+    cut = f", truncated at ±{d.truncate:g}σ" if d.truncate else ""
+    if d.low is not None:
+        return f"uniform on [{d.low:g}, {d.high:g}]"
+    if d.rel is not None:
+        spread = d.rel if isinstance(d.rel, list) else [d.rel]
+        text = ", ".join(f"{r:g}" for r in spread)
+        form = (f"×(1 ± [{text}])" if d.dist == "uniform" else f"×(1 + N(0, [{text}]²))")
+    else:
+        spread = d.sd if d.dist == "normal" else d.half_width
+        s = spread if isinstance(spread, list) else [spread]
+        text = ", ".join(f"{x:g}" for x in s)
+        form = f"+ U(±[{text}])" if d.dist == "uniform" else f"+ N(0, [{text}]²)"
+    turn = f", principal axes turned {d.axes_deg:g}°" if d.axes_deg else ""
+    return f"{d.dist} {form}{cut}{turn}"
+
+
+def requirement_of(mc: MonteCarlo) -> RequirementWords:
+    r, plant = mc.base.requirements, mc.base.mission.plant
+    delay = ("the delay as drawn" if "mission.plant.delay_steps" in mc.config.dispersions
+             else f"{plant.delay_steps} step(s) of delay")
+    loop = ("the simulator's update (reduced plant)" if plant.model == "reduced" else
+            f"the sampled-data plant, {delay}")
+    return RequirementWords(r.gain_margin_db, r.phase_margin_deg, r.delay_margin_steps,
+                            mc.config.ripple_max, loop)
+
+
+def run_montecarlo(mc: MonteCarlo, root: Path, client, progress: bool = False,
+                   worker_timeout: float = 300.0, jobs=None) -> list[dict]:
+    """Every sample on ``client`` (:func:`pipeline.sweep.driver.execute_tasks`)."""
+    from pipeline.sweep.driver import execute_tasks
+
+    samples = {s.name: s for s in mc.samples}
+    ripple = mc.config.ripple_max
+
+    def submit(name: str, topic: str, key: str):
+        s = samples[name]
+        return client.submit(sample_task, s.spec, s.index, list(s.seed), s.draws, ripple,
+                             str(root), topic, pure=False, key=key)
+
+    def failed(name: str, error: str) -> dict:
+        s = samples[name]
+        return errored_record(name, s.index, list(s.seed), s.spec.spec_hash, s.draws, error)
+
+    return execute_tasks(mc.name, list(samples), submit, failed,
+                         lambda rec: rec["status"] != "error", client, progress,
+                         worker_timeout, jobs, kind="montecarlo", unit="sample")
+
+
+def summary_text(v: MonteCarloVerdict, table: Path) -> str:
+    lines = [f"montecarlo {v.name}: {v.statement}",
+             f"  requirement: GM ≥ {v.requirement.gain_margin_db:g} dB, PM ≥ "
+             f"{v.requirement.phase_margin_deg:g}°, DM ≥ {v.requirement.delay_margin_steps:g} "
+             f"step, no unstable mode, ω_b period-2 amplitude ≤ {v.requirement.ripple_max:g} "
+             f"rad/s, on {v.requirement.loop}"]
+    if v.fails_by_part:
+        lines.append("  failing: " + ", ".join(f"{k} {n}" for k, n in
+                                               sorted(v.fails_by_part.items())))
+    lines.append("  worst samples (re-run one alone: python -m pipeline montecarlo "
+                 f"{v.name} --sample I):")
+    for w in v.worst[:5]:
+        draws = ", ".join(f"{k} {x:.4g}" for k, x in w.draws.items()
+                          if not k.endswith(".redraws"))
+        lines.append(f"    {w.index}: {'pass' if w.passes else 'FAIL (' + '; '.join(w.fails) + ')'}"
+                     f", least GM {w.gain_margin_db:.3g} dB ({w.worst_mode}), seed {w.seed}; "
+                     f"{draws}")
+    lines.append(f"  {v.samples} samples ({v.simulated} run now, the others kept), "
+                 f"{v.wall_s:.1f} s wall -> {table}")
+    return "\n".join(lines)
+
+
+def montecarlo_command(args: argparse.Namespace) -> int:
+    if args.sample is not None:
+        return run_one(args)
+    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
+    from pipeline.sweep.driver import _raise_stop, _Stop, check_writable
+
+    mc = plan_montecarlo(args.file, args.samples)
+    root = Path(args.logs).resolve() / mc.name
+    out = Path(args.out).resolve() / mc.name
+    for folder in (root, out):
+        check_writable(folder)
+    options = ClusterOptions(
+        scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
+        slurm_log_dir=root.parent / ".slurm",
+        worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
+    t0 = time.perf_counter()
+    previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with open_client(options) as session:
+            records = run_montecarlo(mc, root, session.client, sys.stderr.isatty(),
+                                     options.worker_timeout, session.jobs)
+    except _Stop as stop:
+        from pipeline.sweep.driver import Interrupted
+
+        kept = sum(cached_record(root, s.spec, mc.config.ripple_max) is not None
+                   for s in mc.samples)
+        name = signal.Signals(stop.signum).name
+        raise Interrupted(f"montecarlo {mc.name}: stopped by {name}: {kept} of "
+                          f"{len(mc.samples)} samples have a kept record in {root}, which the "
+                          "same command reuses; no table written", stop.signum) from None
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    wall = time.perf_counter() - t0
+    df = make_table(records)
+    v = judge(df, mc.name, mc.config, mc.base,
+              {k: describe(d) for k, d in sorted(mc.config.dispersions.items())},
+              requirement_of(mc), wall)
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {"pipeline.montecarlo": mc.name, "pipeline.mission": mc.base.name,
+            "pipeline.base_spec_hash": mc.base.spec_hash, "pipeline.sample_version":
+            sample_version(), "pipeline.log_dir": str(root)}
+    # The verdict last: a table without its verdict is seen as unfinished.
+    table = write_table(df, out / TABLE_NAME, meta)
+    atomic_write_text(out / VERDICT_NAME, verdict_json(v))
+    print(summary_text(v, table))
+    if v.errored:
+        raise RunFailed(f"montecarlo {mc.name}: {v.errored} of {v.samples} samples did not "
+                        "finish; no verdict")
+    return 0
+
+
+def run_one(args: argparse.Namespace) -> int:
+    """One sample alone (``--sample I``): drawn from its own stream, run into a log through
+    the artefact store, judged, and its log's digest set beside the kept record's."""
+    from pipeline.montecarlo.plan import draw_one
+    from pipeline.montecarlo.sample import judge_columns, log_digest
+    from pipeline.store.door import ArtefactStore
+
+    mc, s = draw_one(args.file, args.sample)
+    root = Path(args.logs).resolve() / mc.name
+    store = ArtefactStore(root)
+    run = store.run(s.spec, expect=None)
+    cols = run.log.columns(run.log.column_names())
+    digest = log_digest(cols)
+    rec = judge_columns(s, cols, run.log.meta.status, run.log.meta.error or "",
+                        mc.config.ripple_max)
+    kept = cached_record(root, s.spec, mc.config.ripple_max)
+    print(f"montecarlo {mc.name} sample {s.index} (seed {list(s.seed)}): "
+          f"{'passes' if rec.passes else 'FAILS: ' + '; '.join(rec.fails)}; least GM "
+          f"{rec.gain_margin_db:.4g} dB ({rec.worst_mode}), PM {rec.phase_margin_deg:.4g}°, "
+          f"DM {rec.delay_margin_steps:.4g} steps, ρ {rec.spectral_radius:.6g}, ω_b ripple "
+          f"{rec.ripple:.3g} rad/s -> {run.path}")
+    print("  draws: " + ", ".join(f"{k} {x!r}" for k, x in s.draws.items()))
+    if kept is None:
+        print(f"  log digest {digest[:16]}…; no kept record of this sample to compare with")
+        return 0
+    same = kept["log_digest"] == digest
+    print(f"  log digest {digest[:16]}… {'=' if same else '≠'} the Monte Carlo's record "
+          f"{kept['log_digest'][:16]}…: " + ("the same bits" if same else "NOT the same bits"))
+    if not same:
+        raise RunFailed(f"montecarlo {mc.name} sample {s.index}: its log is not the bits the "
+                        "Monte Carlo recorded")
+    return 0
+

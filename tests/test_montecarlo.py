@@ -1,0 +1,246 @@
+"""The Monte Carlo of missions (eqs. 38, 39): the dispersions' distributions against SciPy's,
+a dispersed inertia always a rigid body's, every sample drawn again alone bit for bit, the
+robot's inertial parameters and the bus's initial rate in a spec, and the command end to end:
+its records kept and reused, its verdict's bound SciPy's beta quantile, a sample re-run alone
+to the same bits, bad input refused in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.stats
+
+from pipeline.errors import SpecError
+from pipeline.montecarlo.dispersions import Dispersion, draw_inertia, draw_value
+from pipeline.montecarlo.plan import draw_one, plan_montecarlo
+from pipeline.montecarlo.verdict import read_table, read_verdict
+from pipeline.sim.inertial import inertia_matrix, physical_problem
+from pipeline.sim.robot_file import load_spec_robot
+from pipeline.spec import load_spec, with_overrides
+from tests.conftest import run_cli
+
+# A short flight loop: 1 s of the seed robot's sampled-data plant at dt 3.5 ms (286 steps).
+SMALL = """\
+description: test Monte Carlo
+mission: omega_ripple_sampled_delay_dt0035
+set: {{mission.duration: 1.0}}
+seed: 7
+target: {{p: 0.9, confidence: 0.5}}
+ripple_max: 1.0e-4
+dispersions:
+  body.bus.inertia: {{dist: uniform, rel: [0.0, 0.0, 0.2]}}
+  controller.gains.bus.D: {{dist: uniform, {spread}}}
+  mission.plant.delay_steps: {{dist: choice, values: [0, 1]}}
+"""
+
+
+def _write(tmp_path: Path, text: str, name: str = "mc") -> Path:
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+def _rng(i: int = 0) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([99, i]))
+
+
+def test_uniform_relative_draws_are_scipys_uniform():
+    d = Dispersion(dist="uniform", rel=0.2)
+    rng = _rng()
+    x = np.array([draw_value(d, 2.5, rng, "k") for _ in range(4000)])
+    assert x.min() >= 2.0 and x.max() <= 3.0
+    assert scipy.stats.kstest(x, scipy.stats.uniform(loc=2.0, scale=1.0).cdf).pvalue > 1e-3
+
+
+def test_truncated_normal_draws_are_scipys_truncnorm():
+    d = Dispersion(dist="normal", sd=0.5, truncate=1.5)
+    rng = _rng(1)
+    x = np.array([draw_value(d, 1.0, rng, "k") for _ in range(4000)])
+    assert np.all(np.abs(x - 1.0) <= 0.75)
+    ref = scipy.stats.truncnorm(-1.5, 1.5, loc=1.0, scale=0.5)
+    assert scipy.stats.kstest(x, ref.cdf).pvalue > 1e-3
+    # and not the untruncated normal: the test can fail
+    assert scipy.stats.kstest(x, scipy.stats.norm(loc=1.0, scale=0.5).cdf).pvalue < 1e-6
+
+
+def test_vector_draws_per_component():
+    d = Dispersion(dist="normal", sd=[0.0, 0.0, 0.01])
+    v = draw_value(d, [0.0, 0.0, 0.0], _rng(2), "mission.initial_omega_b")
+    assert v[0] == 0.0 and v[1] == 0.0 and v[2] != 0.0
+
+
+@pytest.mark.parametrize("bad", [
+    {"dist": "uniform", "sd": 0.1}, {"dist": "normal", "half_width": 0.1},
+    {"dist": "uniform", "low": 2.0, "high": 1.0}, {"dist": "choice", "values": []},
+    {"dist": "uniform"}, {"dist": "uniform", "rel": 0.1, "half_width": 0.1},
+    {"dist": "uniform", "rel": 0.1, "truncate": 2.0}])
+def test_bad_dispersions_are_refused(bad):
+    with pytest.raises(ValueError):
+        Dispersion(**bad)
+
+
+def test_physical_inertia():
+    assert physical_problem(np.diag([1.0, 2.0, 3.0])) is None
+    assert physical_problem(np.diag([1.0, 1.0, 2.0])) is None  # a flat plate: equality
+    assert "triangle" in physical_problem(np.diag([1.0, 1.0, 2.1]))
+    assert "positive definite" in physical_problem(np.diag([1.0, -1.0, 1.0]))
+
+
+def test_dispersed_inertia_is_always_a_rigid_bodys():
+    """Wide factors and turned axes on a flat body (moments 1, 1, 1.9): many draws break the
+    triangle inequality and are redrawn; every one kept is physical by an independent test
+    (the eigenvalues of Σ = ½ tr(I)·1 − I non-negative), and keeps the factors' moments."""
+    d = Dispersion(dist="uniform", rel=0.3, axes_deg=20.0)
+    nominal = [1.0, 1.0, 1.9, 0.0, 0.0, 0.0]
+    rng = _rng(3)
+    redraws = 0
+    for _ in range(300):
+        got = draw_inertia(d, nominal, rng, "body.bus.inertia")
+        I = inertia_matrix(got.inertia)
+        sigma = 0.5 * np.trace(I) * np.eye(3) - I
+        assert np.linalg.eigvalsh(sigma).min() >= -1e-12
+        assert np.linalg.eigvalsh(I).min() > 0
+        expected = np.sort(np.array([1.0, 1.0, 1.9]) * got.factors)
+        assert np.allclose(np.linalg.eigvalsh(I), expected, rtol=1e-12, atol=0)
+        redraws += got.redraws
+    assert redraws > 0  # the physical limit was met, not missed
+
+
+def test_principal_moment_of_a_diagonal_tensor_is_dispersed_alone():
+    d = Dispersion(dist="uniform", rel=[0.0, 0.0, 0.2])
+    got = draw_inertia(d, [0.3, 0.4, 0.5, 0.0, 0.0, 0.0], _rng(4), "body.bus.inertia")
+    assert got.inertia[:2] == [0.3, 0.4] and got.inertia[3:] == [0.0, 0.0, 0.0]
+    assert 0.4 <= got.inertia[2] <= 0.6
+
+
+def test_inertial_override_reaches_the_model():
+    base = load_spec("nominal")
+    spec = with_overrides(base, {"robot.inertial": {"bus": {
+        "mass": 9.0, "com": [0.0, 0.01, 0.02], "inertia": [0.02, 0.03, 0.04, 0.001, 0.0, 0.0]}}})
+    model = load_spec_robot(spec)
+    assert model.inertias[1].mass == 9.0
+    assert np.array_equal(model.inertias[1].lever, [0.0, 0.01, 0.02])
+    assert np.array_equal(model.inertias[1].inertia,
+                          inertia_matrix([0.02, 0.03, 0.04, 0.001, 0.0, 0.0]))
+    assert spec.spec_hash != base.spec_hash
+    # the payload is the body the camera frame is on
+    spec = with_overrides(base, {"robot.inertial": {"payload": {
+        "mass": 1.5, "com": [0.0, 0.0, 0.0], "inertia": [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]}}})
+    model = load_spec_robot(spec)
+    frame = next(f for f in model.frames if f.name == "camera")
+    assert model.inertias[frame.parentJoint].mass == 1.5
+
+
+def test_unphysical_inertial_override_is_refused_naming_the_field():
+    spec = with_overrides(load_spec("nominal"), {"robot.inertial": {"bus": {
+        "mass": 9.0, "com": [0.0, 0.0, 0.0], "inertia": [0.01, 0.01, 0.05, 0.0, 0.0, 0.0]}}})
+    with pytest.raises(SpecError, match=r"robot\.inertial\.bus\.inertia: .*triangle"):
+        load_spec_robot(spec)
+    with pytest.raises(SpecError, match="unknown body 'arm'"):
+        with_overrides(load_spec("nominal"), {"robot.inertial": {"arm": {
+            "mass": 1.0, "com": [0.0, 0.0, 0.0], "inertia": [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]}}})
+
+
+def test_unset_fields_leave_every_shipped_hash():
+    spec = load_spec("nominal")
+    assert "inertial" not in json.dumps(spec.content()) or spec.robot.inertial == {}
+    explicit = with_overrides(spec, {"robot.inertial": {},
+                                     "mission.initial_omega_b": [0.0, 0.0, 0.0]})
+    assert explicit.spec_hash == spec.spec_hash
+
+
+def test_initial_bus_rate_is_the_first_rows():
+    from pipeline.sim.mission import Mission
+
+    spec = with_overrides(load_spec("short_nominal"), {
+        "mission.initial_omega_b": [0.0, 0.0, 0.02], "mission.duration": 0.09})
+    cols = Mission(spec).run().columns
+    assert np.array_equal(cols["v_breve"][0, :3], [0.0, 0.0, 0.02])
+    # ω_b in the bus frame is v's angular block (eq. 13's ν: ω_b is its own coordinate)
+    assert np.allclose(cols["v"][0, 3:6], [0.0, 0.0, 0.02], rtol=0, atol=1e-15)
+
+
+def test_a_sample_is_drawn_again_alone(tmp_path):
+    path = _write(tmp_path, SMALL.format(spread="rel: 0.1"))
+    mc = plan_montecarlo(path, samples=5)
+    for i in (0, 3):
+        _, alone = draw_one(path, i)
+        assert alone.draws == mc.samples[i].draws
+        assert alone.spec.spec_hash == mc.samples[i].spec.spec_hash
+    assert len({s.spec.spec_hash for s in mc.samples}) == 5
+    delays = {s.spec.mission.plant.delay_steps for s in plan_montecarlo(path, 40).samples}
+    assert delays == {0, 1}
+
+
+@pytest.mark.parametrize("text, field", [
+    (SMALL.format(spread="rel: 0.1").replace("ripple_max: 1.0e-4\n", ""), "ripple_max"),
+    (SMALL.format(spread="rel: 0.1") + "  controller.gains.nope.D: {dist: uniform, rel: 0.1}\n",
+     "dispersions.controller.gains.nope.D"),
+    (SMALL.format(spread="rel: 0.1") + "  body.arm.mass: {dist: uniform, rel: 0.1}\n",
+     "dispersions.body.arm"),
+    (SMALL.format(spread="rel: 0.1") + "  controller.integrator: {dist: uniform, rel: 0.1}\n",
+     "dispersions.controller.integrator"),
+    (SMALL.format(spread="rel: 0.1").replace("values: [0, 1]", "values: [0.5]"), "sample 0"),
+    (SMALL.format(spread="rel: 0.1").replace("dist: choice", "dist: chance"),
+     "dispersions.mission.plant.delay_steps.dist")])
+def test_bad_files_are_refused_in_one_line(tmp_path, text, field):
+    path = _write(tmp_path, text)
+    r = run_cli("montecarlo", path, "--samples", "2", "--logs", tmp_path / "l",
+                "--out", tmp_path / "o")
+    assert r.returncode == 2, r.stderr
+    assert field in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "o").exists() and not (tmp_path / "l").exists()
+
+
+def test_montecarlo_end_to_end(tmp_path):
+    """Eight samples on the embedded Dask cluster: the bus damping from 1 to 5 N·m·s/rad puts
+    the bus yaw's gain margin below 6 dB above 2.2 with one step of delay (4.5 without). The
+    table, the verdict and its bound (SciPy's beta quantile, computed here); the records
+    reused by a second run; a sample re-run alone to the same bits, and a kept record altered
+    caught."""
+    path = _write(tmp_path, SMALL.format(spread="low: 1.0, high: 5.0"))
+    args = ("--samples", "8", "--logs", tmp_path / "l", "--out", tmp_path / "o")
+    r = run_cli("montecarlo", path, *args, timeout=300)
+    assert r.returncode == 0, r.stderr
+    table = read_table(tmp_path / "o" / "mc" / "montecarlo.parquet")
+    v = read_verdict(tmp_path / "o" / "mc" / "verdict.json")
+    assert len(table) == 8 and table["ran"].all()
+    k = int(table["passes"].sum())
+    assert 0 < k < 8, table[["gain_margin_db", "fails"]]
+    assert v.passes == k and v.samples == 8
+    assert v.lower_bound == pytest.approx(scipy.stats.beta.ppf(0.5, k, 8 - k + 1), rel=1e-12)
+    assert v.shown is (v.lower_bound >= 0.9)
+    failing = table[~table["passes"]]
+    assert (failing["gain_margin_db"] < 6.0).all() or failing["fails"].str.contains("ripple").any()
+    assert v.worst[0].passes is False and "controller.gains.bus.D" in v.worst[0].draws
+    assert "NOT shown" in r.stdout or "shown" in r.stdout
+
+    again = run_cli("montecarlo", path, *args, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert not read_table(tmp_path / "o" / "mc" / "montecarlo.parquet")["ran"].any()
+
+    worst = v.worst[0].index
+    alone = run_cli("montecarlo", path, "--sample", str(worst), "--logs", tmp_path / "l")
+    assert alone.returncode == 0, alone.stderr
+    assert "the same bits" in alone.stdout
+    assert (tmp_path / "l" / "mc" / f"mc__{worst:05d}" / "run.parquet").is_file()
+
+    kept = tmp_path / "l" / "mc" / f"mc__{worst:05d}.json"
+    data = json.loads(kept.read_text())
+    data["record"]["log_digest"] = "0" * 64
+    kept.write_text(json.dumps(data))
+    altered = run_cli("montecarlo", path, "--sample", str(worst), "--logs", tmp_path / "l")
+    assert altered.returncode == 1 and "NOT the same bits" in altered.stdout
+
+
+def test_the_seed_montecarlo_file_is_valid():
+    mc = plan_montecarlo("seed_dispersions", samples=3)
+    assert mc.base.name == "omega_ripple_sampled_delay_dt0035"
+    assert plan_montecarlo.__doc__
+    full_n = __import__("pipeline.analysis.confidence", fromlist=["x"]).samples_needed(0.9973, 0.9)
+    assert full_n == 852
+    assert pin  # the dispersed body is Pinocchio's (imported for the fixture's robots)
