@@ -307,6 +307,28 @@ def _stage(sub, name: str, summary: str, example: str) -> argparse.ArgumentParse
                           formatter_class=_formatter)
 
 
+def _dask_options(s: argparse.ArgumentParser, lifetime: bool = True) -> None:
+    """Where a stage's Dask tasks run (``pipeline.sweep.cluster``): the sweeps', the Monte
+    Carlos' and the power studies' options."""
+    s.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="address of an existing Dask scheduler (default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
+                   "e.g. --scheduler tcp://10.0.0.5:8786)")
+    s.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="workers of the embedded cluster or of SLURM "
+                   "(default: 2; e.g. --workers 4)")
+    s.add_argument("--slurm", action="store_true",
+                   help="start the workers as SLURM jobs through dask-jobqueue "
+                   "(default: off; e.g. --slurm --workers 16)")
+    s.add_argument("--worker-timeout", type=float, default=None, metavar="S",
+                   help="fail (exit 2) if no worker joins within S seconds "
+                   "(default: 300; e.g. --worker-timeout 600)")
+    if lifetime:
+        s.add_argument("--lifetime", type=float, default=None, metavar="S",
+                       help="SLURM workers retire after S seconds, before their walltime "
+                       "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from pipeline.version import package_version
 
@@ -460,22 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a spec key and its values, repeatable; the grid is the product of "
                    "the lists (no default: at least one is needed; "
                    "e.g. --set mission.dt=0.01,0.02,0.03)")
-    s.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="address of an existing Dask scheduler (default: "
-                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
-                   "e.g. --scheduler tcp://10.0.0.5:8786)")
-    s.add_argument("--workers", type=int, default=2, metavar="N",
-                   help="workers of the embedded cluster or of SLURM "
-                   "(default: 2; e.g. --workers 4)")
-    s.add_argument("--slurm", action="store_true",
-                   help="start the workers as SLURM jobs through dask-jobqueue "
-                   "(default: off; e.g. --slurm --workers 16)")
-    s.add_argument("--worker-timeout", type=float, default=None, metavar="S",
-                   help="fail (exit 2) if no worker joins within S seconds "
-                   "(default: 300; e.g. --worker-timeout 600)")
-    s.add_argument("--lifetime", type=float, default=None, metavar="S",
-                   help="SLURM workers retire after S seconds, before their walltime "
-                   "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
+    _dask_options(s)
     s.add_argument("--name", default=None,
                    help="sweep name, the folder of its logs and table (default: from the "
                    "spec and the keys; e.g. --name nominal_dt)")
@@ -497,22 +504,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--sample", type=int, default=None, metavar="I",
                    help="run sample I alone, write its log and compare its bits with the kept "
                    "record (default: all samples; e.g. --sample 17)")
-    m.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="address of an existing Dask scheduler (default: "
-                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
-                   "e.g. --scheduler tcp://10.0.0.5:8786)")
-    m.add_argument("--workers", type=int, default=2, metavar="N",
-                   help="workers of the embedded cluster or of SLURM (default: 2; e.g. "
-                   "--workers 4)")
-    m.add_argument("--slurm", action="store_true",
-                   help="start the workers as SLURM jobs through dask-jobqueue "
-                   "(default: off; e.g. --slurm --workers 16)")
-    m.add_argument("--worker-timeout", type=float, default=None, metavar="S",
-                   help="fail (exit 2) if no worker joins within S seconds "
-                   "(default: 300; e.g. --worker-timeout 600)")
-    m.add_argument("--lifetime", type=float, default=None, metavar="S",
-                   help="SLURM workers retire after S seconds, before their walltime "
-                   "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
+    _dask_options(m)
     m.add_argument("--logs", default="logs/montecarlo", metavar="DIR",
                    help="where each sample's record is kept, DIR/<montecarlo>/<sample>.json, "
                    "and a sample run alone writes its log (default: logs/montecarlo; e.g. "
@@ -526,19 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
                "noise", "detector_power")
     w.add_argument("file", help="a power file: a path, or a name under specs/montecarlo/ "
                    "(e.g. detector_power)")
-    w.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="address of an existing Dask scheduler (default: "
-                   "$DASK_SCHEDULER_ADDRESS, else an embedded LocalCluster; "
-                   "e.g. --scheduler tcp://10.0.0.5:8786)")
-    w.add_argument("--workers", type=int, default=2, metavar="N",
-                   help="workers of the embedded cluster or of SLURM (default: 2; e.g. "
-                   "--workers 4)")
-    w.add_argument("--slurm", action="store_true",
-                   help="start the workers as SLURM jobs through dask-jobqueue "
-                   "(default: off; e.g. --slurm --workers 16)")
-    w.add_argument("--worker-timeout", type=float, default=None, metavar="S",
-                   help="fail (exit 2) if no worker joins within S seconds "
-                   "(default: 300; e.g. --worker-timeout 600)")
+    _dask_options(w, lifetime=False)
     w.add_argument("--logs", default="logs/power", metavar="DIR",
                    help="where each sample's record is kept (default: logs/power; e.g. --logs "
                    "/scratch/power)")

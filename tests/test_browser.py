@@ -111,7 +111,7 @@ def report_with_sweep() -> Path:
     and analysed in this process, the table written as the sweep driver writes it), rendered."""
     from pipeline.sweep.driver import plan_sweep
     from pipeline.sweep.point import run_point
-    from pipeline.sweep.results import make_table, write_sweep_table
+    from pipeline.sweep.results import make_table, write_table
 
     b = built()
     out = b.root / "reports_with_sweep"
@@ -122,7 +122,7 @@ def report_with_sweep() -> Path:
                        b.root / "sweep_logs", out / "sweeps")
     records = [run_point(p.spec, str(sweep.log_dir)) for p in sweep.points]
     df = make_table(sweep.keys, [p.overrides for p in sweep.points], records)
-    write_sweep_table(df, sweep.table_path, {"pipeline.sweep": sweep.name,
+    write_table(df, sweep.table_path, {"pipeline.sweep": sweep.name,
                                              "pipeline.keys": ",".join(sweep.keys)})
     render_all(out)
     return out

@@ -91,7 +91,7 @@ class Context:
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> sweep.background.SweepJob, started by start_sweeps
-        self._mc_jobs: dict = {}  # alias -> montecarlo.background.MonteCarloJob
+        self._mc_jobs: dict = {}  # alias -> sweep.background.BackgroundJob (Monte Carlo, power)
         self._montecarlos: dict[str, tuple[dict, dict]] = {}
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key

@@ -7,45 +7,31 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
-from pipeline.errors import RunFailed
 from pipeline.montecarlo.verdict import TABLE_NAME, VERDICT_NAME, read_verdict
 from pipeline.orphans import child_environment
 from pipeline.paths import display_path
 from pipeline.progress import say
 from pipeline.provenance.keys import sample_version
-
-
-@dataclass
-class MonteCarloJob:
-    name: str
-    out: Path  # the folder of its table and verdict
-    stage: str = "montecarlo"
-    process: subprocess.Popen | None = None
-    log: Path | None = None
-    t0: float = 0.0
-
-    def stop(self) -> None:
-        if self.process is not None and self.process.poll() is None:
-            self.process.terminate()
-            self.process.wait()
+from pipeline.sweep.background import BackgroundJob
 
 
 def start_montecarlo(path: Path, samples: int | None, logs: Path, out: Path,
-                     workers: int = 2, stage: str = "montecarlo") -> MonteCarloJob:
+                     workers: int = 2, stage: str = "montecarlo") -> BackgroundJob:
     """Start ``python -m pipeline montecarlo`` (or ``power``, the detector-power study) in the
     background, its output in ``<out>/<name>/<stage>.log``; the samples it finds kept are not
     run again."""
     name = Path(path).stem
-    job = MonteCarloJob(name, Path(out) / name, stage=stage)
+    job = BackgroundJob(name, stage)
     cmd = [sys.executable, "-m", "pipeline", stage, str(path), "--logs", str(logs),
            "--out", str(out), "--workers", str(workers)]
     if samples is not None:
         cmd += ["--samples", str(samples)]
-    job.out.mkdir(parents=True, exist_ok=True)
-    job.log = job.out / f"{stage}.log"
+    folder = Path(out) / name  # its table and result beside its output
+    folder.mkdir(parents=True, exist_ok=True)
+    job.log = folder / f"{stage}.log"
     with open(job.log, "wb") as f:
         job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT,
                                        env=child_environment())
@@ -55,33 +41,23 @@ def start_montecarlo(path: Path, samples: int | None, logs: Path, out: Path,
     return job
 
 
-def _wait(job: MonteCarloJob) -> None:
-    if job.process is not None:
-        rc = job.process.wait()
-        lines = job.log.read_text(errors="replace").strip().splitlines() or ["(no output)"]
-        if rc != 0:
-            say(f"{job.stage} {job.name}: failed after {time.perf_counter() - job.t0:.1f} s")
-            raise RunFailed(f"{job.stage} {job.name} failed (exit {rc}): {lines[-1]} (all of "
-                            f"its output: {display_path(job.log)})")
-        say(f"{job.stage} {job.name}: done in {time.perf_counter() - job.t0:.1f} s")
-        job.process = None
-
-
-def finish_power(job: MonteCarloJob) -> tuple[dict, dict, list[Path]]:
+def finish_power(job: BackgroundJob) -> tuple[dict, dict, list[Path]]:
     """Wait for the detector-power study, then its result (as a mapping), provenance, files."""
-    from pipeline.montecarlo.power import RESULT_NAME, TABLE_NAME, read_power
+    from pipeline.montecarlo import power
 
-    _wait(job)
-    result = job.out / RESULT_NAME
-    prov = {"source": "power", "version": f"samples {sample_version()}",
-            "file": display_path(result)}
-    return asdict(read_power(result)), prov, [job.out / TABLE_NAME, result]
+    return _finish(job, power.RESULT_NAME, power.TABLE_NAME, power.read_power)
 
 
-def finish_montecarlo(job: MonteCarloJob) -> tuple[dict, dict, list[Path]]:
+def finish_montecarlo(job: BackgroundJob) -> tuple[dict, dict, list[Path]]:
     """Wait for the Monte Carlo, then its verdict (as a mapping), provenance and files."""
-    _wait(job)
-    verdict = job.out / VERDICT_NAME
-    prov = {"source": "montecarlo", "version": f"samples {sample_version()}",
-            "file": display_path(verdict)}
-    return asdict(read_verdict(verdict)), prov, [job.out / TABLE_NAME, verdict]
+    return _finish(job, VERDICT_NAME, TABLE_NAME, read_verdict)
+
+
+def _finish(job: BackgroundJob, result_name: str, table_name: str, read
+            ) -> tuple[dict, dict, list[Path]]:
+    job.wait()
+    folder = job.log.parent
+    result = folder / result_name
+    prov = {"source": job.stage, "version": f"samples {sample_version()}",
+            "file": display_path(result)}
+    return asdict(read(result)), prov, [folder / table_name, result]

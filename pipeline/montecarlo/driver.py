@@ -22,9 +22,9 @@ from pipeline.montecarlo.verdict import (
     judge,
     make_table,
     verdict_json,
-    write_table,
 )
 from pipeline.provenance.keys import sample_version
+from pipeline.sweep.results import write_table
 
 
 def describe(d: Dispersion) -> str:

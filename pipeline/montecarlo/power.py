@@ -28,7 +28,6 @@ judgement: counted, never a detection or a miss.
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import math
 import time
@@ -40,7 +39,7 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from pipeline.atomic_files import atomic_write_bytes, atomic_write_text
+from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import LogError, RunFailed, SpecError
 from pipeline.montecarlo.plan import resolve_montecarlo
 from pipeline.montecarlo.task import keep, kept, worker
@@ -253,11 +252,14 @@ def rates(df: pd.DataFrame, plan: PowerPlan, wall_s: float) -> PowerResult:
     unit = UNITS.get(c.noise, "")
     words = []
     for d in DETECTORS:
-        where = (f"misses the ripple more often than not from {c.noise} = {cross[d]:.3g} {unit}"
+        where = (f"misses the ripple in half the runs from {c.noise} = {cross[d]:.3g} {unit}"
                  if cross[d] is not None else
-                 f"sees the ripple in most samples at every level up to {c.levels[-1]:g} {unit}")
-        words.append(f"the {d} detector {where}, with at most {100 * fa_max[d]:.3g} % false "
-                     "alarms")
+                 f"sees the ripple in most runs at every level up to {c.levels[-1]:g} {unit}")
+        alarms = [x for x in levels if x.false_alarm[d] > 0]
+        fa = ("and raises no false alarm on the quiet mission at any level" if not alarms else
+              f"and raises false alarms on the quiet mission in up to "
+              f"{100 * fa_max[d]:.3g} % of its runs (first at {alarms[0].level:g} {unit})")
+        words.append(f"the {d} detector {where}, {fa}")
     return PowerResult(
         name=plan.name, description=c.description, ripple=c.ripple, quiet=c.quiet,
         noise=c.noise, unit=unit, samples=c.samples, lag1_threshold=LAG1_THRESHOLD,
@@ -267,13 +269,13 @@ def rates(df: pd.DataFrame, plan: PowerPlan, wall_s: float) -> PowerResult:
 
 
 def write_power(df: pd.DataFrame, result: PowerResult, out: Path) -> Path:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    """The table, then the result (the result last: a table without it is unfinished)."""
+    from pipeline.provenance.keys import sample_version
+    from pipeline.sweep.results import write_table
 
     out.mkdir(parents=True, exist_ok=True)
-    buf = io.BytesIO()
-    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), buf, compression="zstd")
-    atomic_write_bytes(out / TABLE_NAME, buf.getvalue())
+    write_table(df, out / TABLE_NAME, {"pipeline.power": result.name,
+                                       "pipeline.sample_version": sample_version()})
     atomic_write_text(out / RESULT_NAME, json.dumps(asdict(result), indent=1))
     return out / RESULT_NAME
 

@@ -11,7 +11,6 @@ A sample whose task did not finish is no judgement: with any, there is no verdic
 
 from __future__ import annotations
 
-import io
 import json
 import math
 from dataclasses import asdict, dataclass
@@ -23,7 +22,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.analysis.confidence import confidence_verdict, samples_needed
-from pipeline.atomic_files import atomic_write_bytes
 from pipeline.errors import LogError
 
 TABLE_NAME = "montecarlo.parquet"
@@ -102,16 +100,6 @@ def make_table(records: list[dict]) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=[*RECORD_COLUMNS, *(DRAW + k for k in keys)])
     df["attempts"] = df["attempts"].fillna(0).astype(int)
     return df
-
-
-def write_table(df: pd.DataFrame, path: Path, metadata: dict[str, str]) -> Path:
-    table = pa.Table.from_pandas(df, preserve_index=False)
-    md = {**(table.schema.metadata or {}),
-          **{k.encode(): v.encode() for k, v in metadata.items()}}
-    buf = io.BytesIO()
-    pq.write_table(table.replace_schema_metadata(md), buf, compression="zstd")
-    atomic_write_bytes(path, buf.getvalue())
-    return path
 
 
 def read_table(path: Path | str) -> pd.DataFrame:

@@ -124,7 +124,8 @@ def detector_power(result: Path, path: Path) -> str | None:
         return f"{result}: fewer than two positive noise levels"
     floor = positive.min() / 3  # where level 0 is drawn
     x = np.where(levels > 0, levels, floor)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(13, 4.2), layout="constrained",
+                                 width_ratios=(1.6, 1))
     styles = {"lag1": ("tab:purple", "o"), "spectral": ("tab:green", "s")}
     for d in DETECTORS:
         color, marker = styles[d]
@@ -138,11 +139,9 @@ def detector_power(result: Path, path: Path) -> str | None:
     a1.set(xlabel=label(f"{r.noise} ({r.unit}); level 0 at the left edge"),
            ylabel="rate (%)", ylim=(-3, 103),
            title=label(f"Detectors against {r.noise}, {r.samples} samples per point"))
-    a1.legend(loc="center left", fontsize=8)
-    a2.loglog(x, [max(v.ripple_amplitude, 1e-16) for v in r.levels], "-o", color="k",
-              label="ω_b period-2 amplitude as measured (ripple mission, median)")
+    a1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    a2.loglog(x, [max(v.ripple_amplitude, 1e-16) for v in r.levels], "-o", color="k")
     a2.set(xlabel=label(f"{r.noise} ({r.unit})"), ylabel="rad/s",
-           title="What the detectors see")
-    a2.legend(loc="upper left")
+           title="ω_b period-2 amplitude as measured\n(ripple mission, median)")
     _save(fig, path)
     return None

@@ -22,21 +22,47 @@ from pipeline.sweep.results import stability_bracket
 
 
 @dataclass
-class SweepJob:
-    """A sweep of the claims: its plan and, unless its table was current, the ``python -m
-    pipeline sweep`` process making it in the background."""
+class BackgroundJob:
+    """A ``python -m pipeline STAGE`` process of the claims, running in the background (a
+    sweep, a Monte Carlo, a power study), its output in ``log``."""
 
     name: str
-    plan: Sweep
+    stage: str
     process: subprocess.Popen | None = None
     log: Path | None = None
     t0: float = 0.0
 
     def stop(self) -> None:
-        """End a sweep still running (the claims failed before they needed it)."""
+        """End the process if still running (the claims failed before they needed it)."""
         if self.process is not None and self.process.poll() is None:
             self.process.terminate()
             self.process.wait()
+
+    def wait(self, summary: str = "") -> None:
+        """Wait for the process, if one was started: RunFailed with its last line unless it
+        ended well, else say it is done (with the first line of its output holding
+        ``summary``)."""
+        if self.process is None:
+            return
+        rc = self.process.wait()
+        lines = self.log.read_text(errors="replace").strip().splitlines() or ["(no output)"]
+        took = time.perf_counter() - self.t0
+        if rc != 0:
+            say(f"{self.stage} {self.name}: failed after {took:.1f} s")
+            raise RunFailed(f"{self.stage} {self.name} failed (exit {rc}): {lines[-1]} (all of "
+                            f"its output: {display_path(self.log)})")
+        line = next((ln for ln in lines if summary and summary in ln), "")
+        say(f"{self.stage} {self.name}: done in {took:.1f} s"
+            + (f" ({line.split(' -> ')[0]})" if line else ""))
+        self.process = None
+
+
+@dataclass
+class SweepJob(BackgroundJob):
+    """A sweep of the claims: its plan and, unless its table was current, the ``python -m
+    pipeline sweep`` process making it in the background."""
+
+    plan: Sweep | None = None
 
 
 def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
@@ -46,7 +72,7 @@ def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
     output goes to ``<out>/<name>/sweep.log`` (lines of two sweeps and the missions would
     interleave, their bars collide)."""
     plan = plan_sweep(spec, sets, name, logs, out)
-    job = SweepJob(name, plan)
+    job = SweepJob(name, "sweep", plan=plan)
     if current_sweep(plan.table_path, plan.base.spec_hash, [p.name for p in plan.points]):
         return job
     cmd = [sys.executable, "-m", "pipeline", "sweep", spec, "--name", name,
@@ -69,17 +95,7 @@ def finish_sweep(job: SweepJob, key: str = "mission.dt", lag: str = "dominant_la
                  predicted: str = "dt_star_damping", unstable: str = "above"
                  ) -> tuple[dict, dict]:
     """Wait for the sweep (if it was started), then its stability bracket and provenance."""
-    if job.process is not None:
-        rc = job.process.wait()
-        lines = job.log.read_text(errors="replace").strip().splitlines() or ["(no output)"]
-        if rc != 0:
-            say(f"sweep {job.name}: failed after {time.perf_counter() - job.t0:.1f} s")
-            raise RunFailed(f"sweep {job.name} failed (exit {rc}): {lines[-1]} (all of its "
-                            f"output: {display_path(job.log)})")
-        summary = next((ln for ln in lines if " points: " in ln), "")
-        say(f"sweep {job.name}: done in {time.perf_counter() - job.t0:.1f} s"
-            + (f" ({summary.split(' -> ')[0]})" if summary else ""))
-        job.process = None
+    job.wait(summary=" points: ")
     bracket = stability_bracket(job.plan.table_path, key, lag, predicted, unstable)
     prov = {"source": "sweep", "version": f"sim {sim_version()}, analysis {analysis_version()}",
             "file": display_path(job.plan.table_path)}

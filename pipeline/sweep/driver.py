@@ -31,7 +31,7 @@ from pipeline.sweep.cluster import (
 from pipeline.sweep.grid import Point, build_grid, parse_sets, sweep_name
 from pipeline.sweep.point import figures, sweep_task
 from pipeline.sweep.progress import Progress, Tracker
-from pipeline.sweep.results import TABLE_NAME, make_table, summary_text, write_sweep_table
+from pipeline.sweep.results import TABLE_NAME, make_table, summary_text, write_table
 
 WATCH_EVERY = 2.0  # s between the watchdog's looks at the worker count
 
@@ -223,7 +223,7 @@ def run_sweep(sweep: Sweep, client, progress: bool = False, worker_timeout: floa
             # the driver's keys; each worker checked its own logs and analyses against its own
             "pipeline.sim_version": sim_version(), "pipeline.analysis_version": analysis_version(),
             "pipeline.keys": ",".join(sweep.keys), "pipeline.log_dir": str(sweep.log_dir)}
-    return df, write_sweep_table(df, sweep.table_path, meta)
+    return df, write_table(df, sweep.table_path, meta)
 
 
 def check_writable(folder: Path) -> None:

@@ -39,8 +39,9 @@ def make_table(keys: list[str], overrides: list[dict], records: list[dict]) -> p
     return df
 
 
-def write_sweep_table(df: pd.DataFrame, path: Path, metadata: dict[str, str]) -> Path:
-    """Write ``df`` to Parquet atomically, with ``pipeline.*`` schema metadata."""
+def write_table(df: pd.DataFrame, path: Path, metadata: dict[str, str]) -> Path:
+    """Write ``df`` to Parquet atomically, with ``pipeline.*`` schema metadata (a sweep's, a
+    Monte Carlo's and a power study's tables)."""
     table = pa.Table.from_pandas(df, preserve_index=False)
     md = {**(table.schema.metadata or {}), **{k.encode(): v.encode() for k, v in metadata.items()}}
     buf = io.BytesIO()
