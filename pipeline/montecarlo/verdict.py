@@ -142,6 +142,13 @@ def worst_samples(df: pd.DataFrame, count: int = WORST) -> list[WorstSample]:
     return out
 
 
+def mission_words(base, config) -> str:
+    """The mission the samples fly: the spec dispersed and the file's fixed overrides (a
+    ``set: {mission.dt: …}`` makes another loop than the spec's name says)."""
+    fixed = ", ".join(f"{k} = {v}" for k, v in sorted(config.set.items()))
+    return f"{base.name} with {fixed}" if fixed else base.name
+
+
 def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str],
           requirement: RequirementWords, wall_s: float) -> MonteCarloVerdict:
     """The verdict of the table (eqs. 38, 39); see the module docstring."""
@@ -174,7 +181,8 @@ def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str]
                      + ("" if shown or passes < n else
                         f" ({needed} samples, none failing, would show it)"))
     return MonteCarloVerdict(
-        name=name, description=config.description, mission=base.name, seed=config.seed,
+        name=name, description=config.description, mission=mission_words(base, config),
+        seed=config.seed,
         samples=n, passes=passes, errored=errored, pass_fraction=passes / n if n else math.nan,
         target_p=p, confidence=c, lower_bound=bound, needed=needed, shown=shown,
         statement=statement, requirement=requirement, failures=len(judged_failing),
