@@ -308,18 +308,22 @@ def _analysis() -> None:
 
 
 def _plant() -> None:
-    """The sampled-data plant's step (eq. 29): RK4 on the compiled articulated-body algorithm,
-    as ``Mission._hold`` calls it, and the dynamics alone, as the equation check does."""
+    """The sampled-data plant's step (eqs. 29, 41): RK4 on the compiled articulated-body
+    algorithm, whole or split by the command's arrival, as ``Mission._hold`` calls
+    it, and the dynamics alone, as the equation check does."""
     import numpy as np
 
     from pipeline.sim.forward_dynamics import forward_dynamics, rigid_tree
-    from pipeline.sim.plant import integrate_held
+    from pipeline.sim.plant import integrate_held, integrate_split
 
     s = seed()
     tree = rigid_tree(s.robot.model)
     tau = np.zeros(s.robot.model.nv)
     forward_dynamics(tree, s.q.copy(), s.v.copy(), tau)
     integrate_held(tree, s.q.copy(), s.v.copy(), tau, 0.03, s.spec.mission.plant.substeps)
+    # A command arriving within the step (eq. 41): the split hold.
+    integrate_split(tree, s.q.copy(), s.v.copy(), tau, tau, 0.03, 0.25,
+                    s.spec.mission.plant.substeps)
 
 
 def _redundancy() -> None:

@@ -224,6 +224,27 @@ class Sensors(_Block):
     encoder_lsb: NonNegative = 0.0
 
 
+class Timing(_Block):
+    """When a step's command reaches the plant, beyond ``delay_steps`` whole steps (eq. 41):
+    the controller samples its sensors on the clock at t_k and its command reaches the plant
+    at t_k + (delay_steps + δ_k) dt, δ_k = ``delay_fraction`` + ``jitter``·ξ_k with ξ_k uniform
+    on [0, 1) from ``seed``'s stream (the control step's latency jitter); until then the plant
+    holds the command before it. Steps: 0.3 is 30 % of dt."""
+
+    delay_fraction: float = Field(default=0.0, ge=0.0, lt=1.0)
+    jitter: float = Field(default=0.0, ge=0.0, le=1.0)
+    seed: int = 0
+
+    @model_validator(mode="after")
+    def _within_the_step(self) -> Timing:
+        # δ_k stays below one step: the plant holds two commands at most within a step.
+        if self.delay_fraction + self.jitter > 1.0:
+            raise ValueError(f"jitter {self.jitter:g} with delay_fraction "
+                             f"{self.delay_fraction:g} reaches past the step: their sum must "
+                             f"be at most 1")
+        return self
+
+
 class Plant(_Block):
     """What moves between two control instants (eq. 29): ``reduced``, the simulator's update
     of the closed loop in reduced coordinates (eqs. 15, 22: the commanded velocity is the next
@@ -238,13 +259,16 @@ class Plant(_Block):
     bus_torque_max: NonNegative = 0.0
     # What the controller measures of the plant (eq. 40); None: the state itself.
     sensors: Sensors | None = None
+    # The command's arrival within the step and its jitter (eq. 41); None: at the instant.
+    timing: Timing | None = None
 
     @model_validator(mode="after")
     def _used_by_the_model(self) -> Plant:
         # The reduced update has no hold, no delay and no actuator: a field only the sampled
         # plant reads would be accepted and not simulated, and the analysis would then judge
         # a loop that never ran.
-        ignored = sorted(f for f in ("substeps", "delay_steps", "bus_torque_max", "sensors")
+        ignored = sorted(f for f in ("substeps", "delay_steps", "bus_torque_max", "sensors",
+                                      "timing")
                          if f in self.model_fields_set and self.model == "reduced"
                          and getattr(self, f) != type(self).model_fields[f].default)
         if ignored:
@@ -378,7 +402,7 @@ INERT_FIELDS = (("config_sampling", "low"), ("config_sampling", "high"),
 # rest at the start.
 UNSET_FIELDS = (("robot", "locked_joints", {}), ("controller", "null_space", None),
                 ("robot", "inertial", {}), ("mission", "initial_omega_b", [0.0, 0.0, 0.0]),
-                ("mission.plant", "sensors", None))
+                ("mission.plant", "sensors", None), ("mission.plant", "timing", None))
 
 
 def spec_hash_of(content: dict[str, Any]) -> str:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pipeline.budget import Budget, Estimate, check_mission
 from pipeline.shapes import Q
-from pipeline.sim.margins import dominant_root, gain_margin, loop_gain, root_regime
+from pipeline.sim.margins import Latency, dominant_root, gain_margin, loop_gain, root_regime
 from pipeline.sim.robot_file import RobotCard
 from pipeline.sim.stability import GAIN_FIELDS, DampingMode, ModeFixes
 from pipeline.spec import Spec, load_spec
@@ -77,7 +77,8 @@ def _plant(p) -> str:
     """How the spec's plant moves between control instants (eq. 29)."""
     if p.model == "reduced":
         return "reduced (the simulator's update)"
-    delay = f", {p.delay_steps} step of delay" if p.delay_steps else ""
+    latency = Latency.of(p)
+    delay = f", {latency.words()}" if latency != Latency() else ""
     return f"sampled (forward dynamics under the held command, {p.substeps} RK4 steps{delay})"
 
 
@@ -100,7 +101,7 @@ def report_lines(v: Validation) -> list[str]:
     """The lines ``validate`` prints, every number computed from the spec and the budget."""
     s, est, m = v.spec, v.estimate, v.spec.mission
     integ = s.controller.integrator
-    stable = _loop_words(integ, m.plant.delay_steps, m.dt * v.mu_bus)
+    stable = _loop_words(integ, Latency.of(m.plant), m.dt * v.mu_bus)
     c = v.card
     return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
             f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
@@ -115,17 +116,19 @@ def report_lines(v: Validation) -> list[str]:
             *([f"  warning: {c.light_bus}"] if c.light_bus else [])]
 
 
-def _loop_words(integrator: str, delay: int, dt_mu: float) -> str:
-    """A mode's loop as flown (eq. 35): its root's behaviour and the bound on dt·μ that keeps
-    it stable with the plant's delay (g = dt·μ explicit, dt·μ/(1 + dt·μ) imex, below B)."""
-    bound = gain_margin(1.0, delay)[0]
-    z = dominant_root(loop_gain(dt_mu, integrator), delay)
+def _loop_words(integrator: str, latency: Latency, dt_mu: float) -> str:
+    """A mode's loop as flown (eqs. 35, 41): its root's behaviour and the bound on dt·μ that
+    keeps it stable with the plant's delay, the longest flown (g = dt·μ explicit,
+    dt·μ/(1 + dt·μ) imex, below B)."""
+    delay, fraction = latency.worst
+    bound = gain_margin(1.0, delay, fraction)[0]
+    z = dominant_root(loop_gain(dt_mu, integrator), delay, fraction)
     if integrator == "explicit":
         limit = f"stable below {bound:.3g}"
     else:
         limit = ("stable at any step" if bound >= 1.0 else
                  f"stable below {bound / (1.0 - bound):.3g}")
-    return f"{integrator}, {delay} step(s) of delay: {root_regime(z)} ({limit})"
+    return f"{integrator}, {latency.words()}: {root_regime(z)} ({limit})"
 
 
 def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
@@ -140,7 +143,7 @@ def _mode_lines(v: Validation, dt: float, integ: str) -> list[str]:
         f"  damping modes at the start, μ of M̆⁻¹D̆ in 1/s (eq. 21), fastest first: {listed}",
         f"  fastest: {fast.name}, μ = {fast.mu:.4g} 1/s, dt·μ = {f.dt_mu:.3g}, its rate set by "
         f"{gain} = {f.gain:.4g} {unit} (share {fast.shares[fast.block]:.3f}); "
-        + _loop_words(integ, v.spec.mission.plant.delay_steps, f.dt_mu),
+        + _loop_words(integ, Latency.of(v.spec.mission.plant), f.dt_mu),
     ]
     return [*lines, "  " + v.fix]
 

@@ -14,7 +14,7 @@ import pinocchio as pin
 import pytest
 import scipy.stats
 
-from pipeline.errors import SpecError
+from pipeline.errors import LogError, SpecError
 from pipeline.montecarlo.dispersions import Dispersion, draw_inertia, draw_value
 from pipeline.montecarlo.plan import draw_one, plan_montecarlo
 from pipeline.montecarlo.verdict import read_table, read_verdict
@@ -234,7 +234,27 @@ def test_montecarlo_end_to_end(tmp_path):
     data["record"]["log_digest"] = "0" * 64
     kept.write_text(json.dumps(data))
     altered = run_cli("montecarlo", path, "--sample", str(worst), "--logs", tmp_path / "l")
-    assert altered.returncode == 1 and "NOT the same bits" in altered.stdout
+    assert altered.returncode == 1 and "altered or damaged" in altered.stderr
+    assert len(altered.stderr.strip().splitlines()) == 1
+
+    # A failing record turned passing, its seal left as it was: not counted; the sample runs
+    # again and its record is the judgement's again.
+    data = json.loads(kept.read_text())
+    data["record"]["passes"], data["record"]["fails"] = True, []
+    kept.write_text(json.dumps(data))
+    rerun = run_cli("montecarlo", path, *args, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    table = read_table(tmp_path / "o" / "mc" / "montecarlo.parquet")
+    assert table["ran"].sum() == 1 and bool(table.loc[table["index"] == worst, "ran"].iloc[0])
+    assert read_verdict(tmp_path / "o" / "mc" / "verdict.json").passes == k
+
+    # A verdict edited after it was written is refused by its readers, naming the file.
+    verdict = tmp_path / "o" / "mc" / "verdict.json"
+    edited = json.loads(verdict.read_text())
+    edited["shown"] = True
+    verdict.write_text(json.dumps(edited))
+    with pytest.raises(LogError, match=r"verdict\.json.*altered or damaged"):
+        read_verdict(verdict)
 
 
 def test_the_seed_montecarlo_file_is_valid():

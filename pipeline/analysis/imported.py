@@ -34,6 +34,7 @@ from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, VerifiedLog
 from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
+from pipeline.sim.margins import Latency
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import mode_fixes, mode_stiffness
 from pipeline.spec import Spec
@@ -152,7 +153,8 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
     M_b = T.reduced_inertia
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)
     dt, integ = log.spec.mission.dt, controller.controller.integrator
-    delay = controller.mission.plant.delay_steps
+    latency = Latency.of(controller.mission.plant)
+    delay, fraction = latency.worst  # the longest delay the declared loop flies (eq. 41)
     req = rs.Requirement(**controller.requirements.model_dump())
     return rs.DampingTheory(
         controller=controller.name, controller_hash=controller_key(controller), rule=rule,
@@ -160,8 +162,9 @@ def damping_theory(robot: GiordanoRobot, log: VerifiedLog, controller: Spec, k: 
         t=k * dt, s_min_G=T.s_min_G, gamma=gamma, mu=mu.tolist(), mu_max=float(mu[-1]),
         dt_mu_max=float(dt * mu[-1]), dt_star_damping=theory.critical_step(mu[-1]),
         fastest_mode=fastest_mode_record(mode_fixes(M_b, D, dt)),
-        plant=controller.mission.plant.model, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape)),
+        plant=controller.mission.plant.model, delay_steps=latency.steps, requirement=req,
+        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape),
+                         fraction),
         M_breve=M_b.tolist(), D_breve=D.tolist())
 
 

@@ -92,7 +92,8 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     """∂w⁺/∂w of ``Mission.step`` about the rest state at the start pose, and the flown map Φ
     there (eq. 34): the spec's integrator, plant and delay. w = [x̃; e] (18; [x̃; η; e] of
     2(9 + k) for a redundant arm), and with one step of delay the velocity increment the held
-    command carries (9 + k more)."""
+    command carries (9 + k more); with a command arriving within the step (eq. 41) one more,
+    the command it replaces, the map at the arrival the step draws."""
     mission = Mission(spec)
     shape = mission.robot.shape
     q0 = mission.q0.copy()
@@ -101,6 +102,10 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     model = mission.robot.model
     plant = spec.mission.plant
     delay = plant.delay_steps if plant.model == "sampled" else 0
+    split = plant.model == "sampled" and plant.timing is not None
+    waiting = delay + split  # the commands the plant holds (Mission._hold's queue)
+    mission._start_sensors()  # the arrival the step draws: its first (Mission.step restarts)
+    fraction = mission._arrival() if split else 0.0
     T0 = mission.robot.terms(q0, np.zeros(model.nv))
     gamma = conditioning_scale(T0.s_min_G, spec.controller)
     err0 = task_errors(T0, mission.guidance.reference(0.0), gamma, np.zeros(3))
@@ -108,7 +113,7 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
     J_x = position_jacobian(err0.J_x, n)
     Y0 = T0.gamma[12:]  # ν_n = Y0 v: the null-space rows (eq. 37c), none for six joints
 
-    size = 2 * n + n * delay
+    size = 2 * n + n * waiting
     W, Wp = np.zeros((size, size)), np.zeros((size, size))
     for j in range(size):
         cols = []
@@ -117,10 +122,11 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
             dw[j] = sgn * h
             dtheta = T0.gamma_inv @ np.concatenate([np.zeros(3), np.linalg.solve(J_x, dw[:n])])
             s = _state(mission, pin.integrate(model, q0, dtheta), dw[n:2 * n])
-            if delay:
-                mission._held = _increment_force(mission, q0, dw[2 * n:])
+            if waiting:
+                mission._held = [_increment_force(mission, q0, dw[2 * n + j * n:3 * n + j * n])
+                                 for j in range(waiting)]
             nxt, _ = mission.step(s)
-            held = [_force_increment(mission, q0, mission._held)] if delay else []
+            held = [_force_increment(mission, q0, tau) for tau in mission._held or []]
             cols.append((np.concatenate([_z(mission, s, q0, Y0), dw[2 * n:]]),
                          np.concatenate([_z(mission, nxt, q0, Y0), *held])))
         W[:, j] = cols[0][0] - cols[1][0]
@@ -129,8 +135,7 @@ def simulator_map(spec: Spec, h: float = 1e-6) -> Linearization:
 
     ctrl = spec.controller
     K, D = block_gains(ctrl, gamma, shape.null_space_dim)
-    K_x = loop_stiffness(J_x, K, T0.gamma_inv, ctrl.gains.posture,
-                         0.0 if ctrl.null_space is None else ctrl.null_space.K)
+    K_x = loop_stiffness(J_x, K, T0.gamma_inv, ctrl)
     Phi = flown_map(T0.reduced_inertia, D, K_x, J_x, spec.mission.dt,
-                    spec.controller.integrator, plant.model, delay)
+                    spec.controller.integrator, plant.model, delay, fraction)
     return Linearization(Phi_fd, Phi, float(np.abs(Phi_fd - Phi).max()))

@@ -73,6 +73,21 @@ class Dominant:
 
 
 @dataclass(frozen=True)
+class LatencyRecord:
+    """The command's arrival within the step and its jitter (eq. 41): the delay the margins
+    and the map judge (the longest, each margin falling as the delay grows), and the jittered
+    loop's mean-square radius (eq. 41c) with its verdict."""
+
+    delay_fraction: float  # steps: the earliest arrival beyond delay_steps
+    jitter_steps: float  # the arrival's spread (uniform)
+    judged_delay_steps: float  # delay_steps + delay_fraction + jitter_steps
+    earliest_radius: float  # ρ of the map at the earliest arrival
+    mean_square_radius: float  # √ρ(E[Φ ⊗ Φ]): < 1 is stable in mean square
+    verdict: str
+    rule: str
+
+
+@dataclass(frozen=True)
 class NoteOrder:
     rule: str
     eig_dominant: Complex
@@ -151,6 +166,8 @@ class Theory:
     # the window's counts: in a complete log's record only
     window_steps_below_floor: int | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     at_or_above_floor: bool | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+    # a command arriving within the step, and its jitter (eq. 41): in such a run's record only
+    latency: LatencyRecord | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 
 @dataclass(frozen=True)

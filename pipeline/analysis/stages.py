@@ -28,7 +28,7 @@ from pipeline.provenance.keys import analysis_version
 from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
 from pipeline.sim.linalg import batched_singular_values
-from pipeline.sim.margins import period_steps, requirement_fixes, root_regime
+from pipeline.sim.margins import Latency, period_steps, requirement_fixes, root_regime
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import (
     BUS_YAW_AXIS,
@@ -353,12 +353,14 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     K, D = block_gains(ctrl, gamma, shape.null_space_dim)
     M_b = T.reduced_inertia
     J_x = position_jacobian(theory.task_jacobian(row["x_tilde"][0], T.R_te), shape.n_breve)
-    K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl.gains.posture,
-                         0.0 if ctrl.null_space is None else ctrl.null_space.K)
+    K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl)
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)  # the step kernel's layout
     dt, integ = spec.mission.dt, spec.controller.integrator
-    plant, delay = spec.mission.plant.model, spec.mission.plant.delay_steps
-    maps = {i: theory.spectrum(theory.flown_map(M_b, D, K_x, J_x, dt, i, plant, delay))
+    plant, latency = spec.mission.plant.model, Latency.of(spec.mission.plant)
+    # The frozen loop at the longest delay (eq. 41): each margin falls as the delay grows.
+    delay, fraction = latency.worst
+    maps = {i: theory.spectrum(theory.flown_map(M_b, D, K_x, J_x, dt, i, plant, delay,
+                                                fraction))
             for i in ("explicit", "imex")}
     own = maps[integ]
     # The same integrator under the note's fully explicit update order (eq. 22): the order
@@ -368,7 +370,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
-                                         delay=delay)
+                                         delay=delay, fraction=fraction)
     req = rs.Requirement(**spec.requirements.model_dump())
     fixes = mode_fixes(M_b, D, dt)
     record = rs.Theory(
@@ -382,7 +384,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         eig_dominant=rs.Complex.of(own.dominant),
         spectral_radius=own.spectral_radius,
         period_steps=period_steps(own.dominant),
-        update_order=flown_order(plant, delay),
+        update_order=flown_order(plant, latency),
         note_order=rs.NoteOrder(rule="note: x̃ advances with the old velocity e (fully explicit)",
                                 eig_dominant=rs.Complex.of(note_map.dominant),
                                 spectral_radius=note_map.spectral_radius),
@@ -390,22 +392,55 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         # The fastest damping mode named, the gain block that sets it and its fixes (eqs. 21,
         # 24): on the servicer the camera roll, not the bus yaw of the card's closed form.
         fastest_mode=fastest_mode_record(fixes),
-        integrator=integ, dt=dt, plant=plant, delay_steps=delay, requirement=req,
-        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape)),
-        requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req),
+        integrator=integ, dt=dt, plant=plant, delay_steps=latency.steps, requirement=req,
+        modes=mode_loops(M_b, D, dt, integ, delay, req, mode_stiffness(K, ctrl, shape),
+                         fraction),
+        requirement_fixes=requirement_fixes(M_b, D, dt, integ, delay, req, fraction),
         M_breve=M_b.tolist(), D_breve=D.tolist(), K_breve=K.tolist(),
         J_x=J_x.tolist(), K_x=K_x.tolist(),
+        latency=latency_record(M_b, D, K_x, J_x, dt, integ, latency, own.spectral_radius),
     )
     return TheoryAtStep(record, direction, row["q"][0])
 
 
-def flown_order(plant: str, delay: int) -> str:
-    """The update the flown map follows (eqs. 22, 34), in words."""
+def flown_order(plant: str, latency: Latency) -> str:
+    """The update the flown map follows (eqs. 22, 34, 41), in words."""
     if plant == "reduced":
         return "simulator's update: x̃ advances with the updated velocity e⁺ (eq. 22)"
+    delay = latency.steps
+    if latency.fraction or latency.jitter:
+        judged = (f", judged at the longest ({sum(latency.worst):.3g} steps)"
+                  if latency.jitter else "")
+        return ("sampled-data plant: the command held over the step (zero-order hold), "
+                f"arriving with {latency.words()}{judged}: the command before it held until "
+                "then, x̃ advancing by the integral of e (eqs. 34, 41)")
     late = f", applied {delay} step{'s' if delay > 1 else ''} late" if delay else ""
     return ("sampled-data plant: the command held over the step (zero-order hold)" + late +
             ", x̃ advancing by the trapezoid of e (eq. 34)")
+
+
+def latency_record(M_b: np.ndarray, D: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
+                   dt: float, integrator: str, latency: Latency, worst_radius: float
+                   ) -> rs.LatencyRecord | None:
+    """A command arriving within the step, jittered or not (eq. 41): the map's radius at the
+    earliest and the longest delay, and the mean-square radius of the loop whose arrival is
+    drawn afresh each step (eq. 41c); None without one."""
+    if not latency.fraction and not latency.jitter:
+        return None
+    low, high = latency.fraction, latency.fraction + latency.jitter
+    terms = theory.split_map_terms(M_b, D, K_x, J_x, dt, integrator, latency.steps)
+    earliest = theory.spectrum(terms[0] + low * terms[1] + low**2 * terms[2]).spectral_radius
+    ms = theory.mean_square_radius(terms, low, high) if latency.jitter else worst_radius
+    word = "stable" if ms < 1.0 else "unstable"
+    verdict = (f"{word} in mean square: ρ_ms = {ms:.6g} with the arrival uniform on "
+               f"[{low:.3g}, {high:.3g}) of a step after {latency.steps} step(s)"
+               if latency.jitter else f"{word}: ρ = {ms:.6g} at {sum(latency.worst):.3g} "
+               f"steps of delay")
+    return rs.LatencyRecord(
+        delay_fraction=latency.fraction, jitter_steps=latency.jitter,
+        judged_delay_steps=latency.steps + high, earliest_radius=earliest,
+        mean_square_radius=ms, verdict=verdict,
+        rule="Φ(δ) = A₀ + δA₁ + δ²A₂ (eq. 41); ρ_ms = √ρ(E[Φ ⊗ Φ]) (eq. 41c), δ uniform")
 
 
 # A step "at the bound" moves ω_b by dt·a_max within 1 %: the tolerance claim C16 gives the

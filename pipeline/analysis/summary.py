@@ -63,6 +63,11 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
              f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
              f"{record.provenance.max_abs_s_min_G:.1e} -> {path}"]
     lines += mode_lines(th.modes, record.prediction, th.plant, th.delay_steps)
+    if th.latency is not None:  # the command arriving within the step (eq. 41)
+        lat = th.latency
+        lines.append(f"  latency: {th.update_order}; margins and map at "
+                     f"{lat.judged_delay_steps:.3g} steps (ρ {th.spectral_radius:.6g}; at the "
+                     f"earliest arrival {lat.earliest_radius:.6g}); {lat.verdict}")
     if record.comparison is not None:
         c = record.comparison
         lines.append(f"  vs {c.against}: lag-1 flip {c.lag1_flip}, ‖Δv‖ ratio "

@@ -10,15 +10,17 @@ import numpy as np
 
 from pipeline.sim.breve_controller import damping_rates  # noqa: F401  (μ, eq. 21)
 from pipeline.sim.rotations import skew
-from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24)
+from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24, 41)
     UPDATE_ORDERS,
     MapSpectrum,
     bisect_critical_step,
     critical_step,
     discrete_map,
     flown_map,
+    mean_square_radius,
     posture_stiffness,
     spectrum,
+    split_map_terms,
 )
 
 

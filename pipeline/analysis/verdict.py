@@ -83,15 +83,16 @@ class ModeLoop:
 
 
 def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
-               delay: int, req: mg.Requirement, K_breve: np.ndarray | None = None
-               ) -> list[ModeLoop]:
-    """Every damping mode of M̆⁻¹D̆, fastest first, with its loop as flown (eqs. 21, 35);
+               delay: int, req: mg.Requirement, K_breve: np.ndarray | None = None,
+               fraction: float = 0.0) -> list[ModeLoop]:
+    """Every damping mode of M̆⁻¹D̆, fastest first, with its loop as flown (eqs. 21, 35; its
+    command arriving ``fraction`` of a step after the ``delay`` steps, eq. 41);
     with the block stiffness K̆, each mode's undamped frequency and damping ratio (the
     stiffness projected on the mode: the bandwidth and damping a gain cut changes)."""
     out = []
     for m in damping_modes(M_breve, D_breve):
         g = mg.loop_gain(dt * m.mu, integrator)
-        z = mg.dominant_root(g, delay)
+        z = mg.dominant_root(g, delay, fraction)
         wn = (float(np.sqrt(max(m.vector @ K_breve @ m.vector, 0.0)))
               if K_breve is not None else 0.0)
         out.append(ModeLoop(
@@ -101,7 +102,7 @@ def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: 
             damping_ratio=m.mu / (2 * wn) if wn > 0 else None, loop_gain=g,
             root=mg.Complex.of(z), modulus=abs(z), period_steps=mg.period_steps(z),
             regime=mg.root_regime(z), rings=bool(abs(z) >= mg.UNIT),
-            margins=mg.margins(g, delay, dt, req), vector=m.vector.tolist()))
+            margins=mg.margins(g, delay, dt, req, fraction), vector=m.vector.tolist()))
     return out
 
 

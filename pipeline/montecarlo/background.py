@@ -4,16 +4,12 @@ it is done."""
 
 from __future__ import annotations
 
-import subprocess
 import sys
-import time
 from dataclasses import asdict
 from pathlib import Path
 
 from pipeline.montecarlo.verdict import TABLE_NAME, VERDICT_NAME, read_verdict
-from pipeline.orphans import child_environment
 from pipeline.paths import display_path
-from pipeline.progress import say
 from pipeline.provenance.keys import sample_version
 from pipeline.sweep.background import BackgroundJob
 
@@ -29,15 +25,8 @@ def start_montecarlo(path: Path, samples: int | None, logs: Path, out: Path,
            "--out", str(out), "--workers", str(workers)]
     if samples is not None:
         cmd += ["--samples", str(samples)]
-    folder = Path(out) / name  # its table and result beside its output
-    folder.mkdir(parents=True, exist_ok=True)
-    job.log = folder / f"{stage}.log"
-    with open(job.log, "wb") as f:
-        job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT,
-                                       env=child_environment())
-    job.t0 = time.perf_counter()
-    say(f"{stage} {name}: started in the background ({workers} workers) -> "
-        f"{display_path(job.log)}")
+    # Its table and result beside its output.
+    job.start(cmd, Path(out) / name / f"{stage}.log", f"{workers} workers")
     return job
 
 

@@ -2,7 +2,9 @@
 
 A dispersion perturbs a nominal value: ``rel`` multiplies it by (1 + ε), ``sd`` (normal) or
 ``half_width`` (uniform) adds ε, ``low``/``high`` draws the value itself (uniform), ``values``
-picks one (choice); a normal ε may be truncated at ``truncate`` standard deviations
+picks one (choice), ``seed`` draws a fresh integer seed for a noise or jitter stream of the
+sample's own (``mission.plant.timing.seed``, ``mission.plant.sensors.seed``); a normal ε may be
+truncated at ``truncate`` standard deviations
 (redrawn until inside). A vector field (``mission.initial_omega_b``, a body's ``com``) draws
 each component. A body's rotational inertia (``body.<bus|payload>.inertia``) is dispersed in its
 principal frame: each principal moment by its own (1 + ε) (``rel``: one for all, or three,
@@ -38,7 +40,7 @@ class Dispersion(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    dist: Literal["uniform", "normal", "choice"]
+    dist: Literal["uniform", "normal", "choice", "seed"]
     rel: NonNegative | list[NonNegative] | None = None
     sd: NonNegative | list[NonNegative] | None = None
     half_width: NonNegative | list[NonNegative] | None = None
@@ -53,7 +55,8 @@ class Dispersion(BaseModel):
         given = [k for k in ("rel", "sd", "half_width", "low", "values", "axes_deg")
                  if getattr(self, k) is not None]
         allowed = {"uniform": ("rel", "half_width", "low", "axes_deg"),
-                   "normal": ("rel", "sd", "axes_deg"), "choice": ("values",)}[self.dist]
+                   "normal": ("rel", "sd", "axes_deg"), "choice": ("values",),
+                   "seed": ()}[self.dist]
         wrong = [k for k in given if k not in allowed]
         if wrong:
             raise ValueError(f"{wrong[0]} does not go with dist: {self.dist} (use "
@@ -65,7 +68,7 @@ class Dispersion(BaseModel):
         spread = [k for k in given if k != "axes_deg"]
         if len(spread) > 1:
             raise ValueError(f"give one of {', '.join(spread)}, not both")
-        if not given:
+        if not given and self.dist != "seed":
             raise ValueError(f"dist: {self.dist} needs one of {', '.join(allowed)}")
         if self.truncate is not None and self.dist != "normal":
             raise ValueError("truncate goes with dist: normal")
@@ -95,6 +98,10 @@ def _component(spread: float | list[float] | None, i: int, n: int, key: str) -> 
 def draw_value(d: Dispersion, nominal: float | list[float], rng: np.random.Generator,
                key: str) -> float | list[float]:
     """The dispersed value of a scalar or vector field from its nominal (eq. 39)."""
+    if d.dist == "seed":
+        if isinstance(nominal, list) or isinstance(nominal, float):
+            raise ValueError(f"{key}: dist: seed draws an integer seed, the field is not one")
+        return int(rng.integers(2**31))
     if d.dist == "choice":
         if isinstance(nominal, list):
             raise ValueError(f"{key}: dist: choice picks a scalar, the field is a vector")

@@ -13,7 +13,7 @@ from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import RunFailed
 from pipeline.montecarlo.dispersions import Dispersion
 from pipeline.montecarlo.plan import MonteCarlo, plan_montecarlo
-from pipeline.montecarlo.task import cached_record, errored_record, sample_task
+from pipeline.montecarlo.task import cached_record, damaged, errored_record, sample_task
 from pipeline.montecarlo.verdict import (
     TABLE_NAME,
     VERDICT_NAME,
@@ -31,6 +31,8 @@ def describe(d: Dispersion) -> str:
     """A dispersion in words, for the table of the report."""
     if d.dist == "choice":
         return f"one of {', '.join(f'{v:g}' for v in d.values)}, equally likely"
+    if d.dist == "seed":
+        return "a seed of the sample's own, from its stream"
     cut = f", truncated at ±{d.truncate:g}σ" if d.truncate else ""
     if d.low is not None:
         return f"uniform on [{d.low:g}, {d.high:g}]"
@@ -49,7 +51,10 @@ def describe(d: Dispersion) -> str:
 
 def requirement_of(mc: MonteCarlo) -> RequirementWords:
     r, plant = mc.base.requirements, mc.base.mission.plant
-    delay = ("the delay as drawn" if "mission.plant.delay_steps" in mc.config.dispersions
+    drawn = any(k == "mission.plant.delay_steps" or k.startswith("mission.plant.timing.")
+                for k in mc.config.dispersions)
+    timed = plant.timing is not None or "mission.plant.timing" in mc.config.set
+    delay = ("the delay as drawn" + (" (its longest, eq. 41)" if timed else "") if drawn
              else f"{plant.delay_steps} step(s) of delay")
     loop = ("the simulator's update (reduced plant)" if plant.model == "reduced" else
             f"the sampled-data plant, {delay}")
@@ -91,8 +96,8 @@ def summary_text(v: MonteCarloVerdict, table: Path) -> str:
     lines.append("  worst samples (re-run one alone: python -m pipeline montecarlo "
                  f"{v.name} --sample I):")
     for w in v.worst[:5]:
-        draws = ", ".join(f"{k} {x:.4g}" for k, x in w.draws.items()
-                          if not k.endswith(".redraws"))
+        draws = ", ".join(f"{k} {int(x) if k.endswith('.seed') else f'{x:.4g}'}"
+                          for k, x in w.draws.items() if not k.endswith(".redraws"))
         lines.append(f"    {w.index}: {'pass' if w.passes else 'FAIL (' + '; '.join(w.fails) + ')'}"
                      f", least GM {w.gain_margin_db:.3g} dB ({w.worst_mode}), seed {w.seed}; "
                      f"{draws}")
@@ -176,6 +181,10 @@ def run_one(args: argparse.Namespace) -> int:
           f"{rec.ripple:.3g} rad/s -> {run.path}")
     print("  draws: " + ", ".join(f"{k} {x!r}" for k, x in s.draws.items()))
     if kept is None:
+        why = damaged(root, s.spec.name)
+        if why is not None:
+            raise RunFailed(f"montecarlo {mc.name} sample {s.index}: its kept record cannot be "
+                            f"compared with ({why})")
         print(f"  log digest {digest[:16]}…; no kept record of this sample to compare with")
         return 0
     same = kept["log_digest"] == digest

@@ -170,13 +170,15 @@ def _as_field(value: float | list[float], nominal: Any) -> Any:
     return value
 
 
-def draw_sample(mc_name: str, config: MonteCarloFile, base: Spec, index: int,
+def draw_sample(mc_name: str, config: MonteCarloFile, fixed: Spec, index: int,
                 nominals: dict[str, dict[str, Any]], path: Path) -> Sample:
-    """Sample ``index``: its draws from its own stream and its validated spec (eq. 39)."""
+    """Sample ``index``: its draws from its own stream and its validated spec (eq. 39), on
+    ``fixed``, the mission spec with the file's fixed overrides (``set``)."""
     seed = (config.seed, index)
     rng = np.random.default_rng(np.random.SeedSequence(list(seed)))
     draws: dict[str, float] = {}
-    overrides: dict[str, Any] = dict(config.set)
+    overrides: dict[str, Any] = {}
+    base = fixed
     bodies = {b: dict(p) for b, p in nominals.items()}
     for key in sorted(config.dispersions):
         d = config.dispersions[key]
@@ -263,5 +265,8 @@ def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
     n = samples or config.samples or samples_needed(config.target.p, config.target.confidence)
     name = path.stem
     indices = range(n) if only is None else [only]
-    drawn = [draw_sample(name, config, base, i, nominals, path) for i in indices]
+    # The nominals are the fixed overrides' (a block the file sets, as mission.plant.timing,
+    # can then be dispersed).
+    fixed = with_overrides(base, config.set) if config.set else base
+    drawn = [draw_sample(name, config, fixed, i, nominals, path) for i in indices]
     return MonteCarlo(name, path, config, base, drawn)

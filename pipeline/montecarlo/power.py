@@ -28,7 +28,6 @@ judgement: counted, never a detection or a miss.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -42,6 +41,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import LogError, RunFailed, SpecError
 from pipeline.montecarlo.plan import resolve_montecarlo
+from pipeline.montecarlo.sealed import sealed_json, unseal
 from pipeline.montecarlo.task import keep, kept, worker
 from pipeline.spec import Sensors, Spec, load_spec, with_overrides
 from pipeline.yamlfile import read_yaml
@@ -276,14 +276,14 @@ def write_power(df: pd.DataFrame, result: PowerResult, out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     write_table(df, out / TABLE_NAME, {"pipeline.power": result.name,
                                        "pipeline.sample_version": sample_version()})
-    atomic_write_text(out / RESULT_NAME, json.dumps(asdict(result), indent=1))
+    atomic_write_text(out / RESULT_NAME, sealed_json(asdict(result), indent=1))
     return out / RESULT_NAME
 
 
 def read_power(path: Path | str) -> PowerResult:
     path = Path(path)
     try:
-        d = json.loads(path.read_text())
+        d = unseal(path.read_text())
         d["levels"] = [LevelRates(**x) for x in d["levels"]]
         return PowerResult(**d)
     except (OSError, ValueError, TypeError, KeyError) as exc:

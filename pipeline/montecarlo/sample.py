@@ -3,8 +3,10 @@
 
 The requirement a sample passes (every part from the mission spec and the Monte Carlo file):
 - the run completes (a failed or diverged run fails);
-- the map of the loop as flown (eq. 34: the sample's integrator, plant and delay) has every
-  eigenvalue inside the unit circle at the analysis' representative step;
+- the map of the loop as flown (eq. 34: the sample's integrator, plant and delay, the longest
+  when its command arrives within the step, eq. 41) has every eigenvalue inside the unit
+  circle at the analysis' representative step, and with a jittered arrival the loop is stable
+  in mean square (eq. 41c);
 - every damping mode meets the spec's gain, phase and delay margins there (eq. 35);
 - ω_b's period-2 amplitude (eq. 30, the largest of its three components) over the analysis
   window is at most ``ripple_max``.
@@ -52,6 +54,7 @@ class SampleRecord:
     fails: list[str]  # the parts of the requirement it misses
     step: int  # the step the theory is taken at (-1: none)
     spectral_radius: float
+    mean_square_radius: float  # a jittered loop's (eq. 41c); NaN without jitter
     dt_mu_max: float
     gain_margin_db: float  # the least over the damping modes
     phase_margin_deg: float  # the least; -inf where a mode has no gain crossover
@@ -113,9 +116,9 @@ def evaluate(spec: Spec, index: int, seed: list[int], draws: dict[str, float],
     """The record of a sample's run (module docstring)."""
     fails: list[str] = [] if status == "complete" else [f"run {status}"]
     nan = math.nan
-    figures = dict(step=-1, spectral_radius=nan, dt_mu_max=nan, gain_margin_db=nan,
-                   phase_margin_deg=nan, delay_margin_steps=nan, worst_mode="", ripple=nan,
-                   bus_rate_lag1=nan)
+    figures = dict(step=-1, spectral_radius=nan, mean_square_radius=nan, dt_mu_max=nan,
+                   gain_margin_db=nan, phase_margin_deg=nan, delay_margin_steps=nan,
+                   worst_mode="", ripple=nan, bus_rate_lag1=nan)
     if status == "complete":
         figures = judge_log(robot, spec, cols, fails, ripple_max)
     return SampleRecord(
@@ -137,6 +140,8 @@ def judge_log(robot, spec: Spec, cols: dict[str, np.ndarray], fails: list[str],
     th = theory_at_step(robot, spec, log, win.start + rep.index).record
     if th.spectral_radius >= 1.0:
         fails.append("unstable mode")
+    if th.latency is not None and not th.latency.mean_square_radius < 1.0:  # eq. 41c
+        fails.append("unstable in mean square")
     gm = min(m.margins.gain_margin_db for m in th.modes)
     pms = [m.margins.phase_margin_deg for m in th.modes]
     pm = -math.inf if any(p is None for p in pms) else min(pms)
@@ -152,7 +157,10 @@ def judge_log(robot, spec: Spec, cols: dict[str, np.ndarray], fails: list[str],
         fails.append("ripple")
     lag1 = bus_rate_data(w_b).lag1
     worst = min(th.modes, key=lambda m: m.margins.gain_margin_db)
-    return dict(step=th.step, spectral_radius=th.spectral_radius, dt_mu_max=th.dt_mu_max,
+    jittered = th.latency is not None and th.latency.jitter_steps > 0
+    return dict(step=th.step, spectral_radius=th.spectral_radius,
+                mean_square_radius=th.latency.mean_square_radius if jittered else math.nan,
+                dt_mu_max=th.dt_mu_max,
                 gain_margin_db=gm, phase_margin_deg=pm, delay_margin_steps=dm,
                 worst_mode=worst.name, ripple=ripple,
                 bus_rate_lag1=math.nan if lag1 is None else lag1)

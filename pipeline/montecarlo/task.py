@@ -6,12 +6,12 @@ the key it was made under: the sample's spec hash, its robot file's digest, the 
 ripple bound. A current record is reused, so a Monte Carlo stopped at any point resumes where
 it was, and a changed dispersion or file runs only the samples it changes. The records are
 small (a log is not kept: 852 logs of the seed robot would be gigabytes); the log's digest is,
-and ``montecarlo … --sample I`` writes the log of one sample again.
+and ``montecarlo … --sample I`` writes the log of one sample again. A record is sealed by its
+content's SHA-256: one edited or damaged is not reused, its sample runs again.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import socket
@@ -19,6 +19,7 @@ from pathlib import Path
 
 from pipeline.atomic_files import atomic_write_text
 from pipeline.montecarlo.sample import SampleRecord, record_dict, run_sample
+from pipeline.montecarlo.sealed import sealed_json, unseal
 from pipeline.provenance.keys import file_digest, sample_version
 from pipeline.spec import Spec
 
@@ -33,22 +34,36 @@ def record_path(root: Path | str, name: str) -> Path:
 
 
 def kept(root: Path | str, name: str, key: dict, fields) -> dict | None:
-    """The record kept as ``<root>/<name>.json`` if it was made under ``key`` and holds every
-    one of ``fields``, else None."""
+    """The record kept as ``<root>/<name>.json`` if it was made under ``key``, holds every
+    one of ``fields`` and matches its content digest (:mod:`pipeline.montecarlo.sealed`: an
+    edited or damaged record is run again, never counted), else None."""
     try:
-        data = json.loads(record_path(root, name).read_text())
+        data = unseal(record_path(root, name).read_text())
     except (OSError, ValueError):
         return None
-    if not isinstance(data, dict) or data.get("key") != key:
+    if data.get("key") != key:
         return None
     rec = data.get("record")
     return rec if isinstance(rec, dict) and set(rec) >= set(fields) else None
 
 
+def damaged(root: Path | str, name: str) -> str | None:
+    """Why the record kept as ``<root>/<name>.json`` cannot be read whole (edited, damaged,
+    not JSON), or None when it can or there is none."""
+    path = record_path(root, name)
+    try:
+        unseal(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as exc:
+        return f"{path}: {exc}"
+    return None
+
+
 def keep(root: Path | str, name: str, key: dict, record: dict) -> None:
     """Keep ``record`` as ``<root>/<name>.json`` with its key, atomically."""
     Path(root).mkdir(parents=True, exist_ok=True)
-    atomic_write_text(record_path(root, name), json.dumps({"key": key, "record": record}))
+    atomic_write_text(record_path(root, name), sealed_json({"key": key, "record": record}))
 
 
 def worker() -> str:
@@ -82,7 +97,8 @@ def errored_record(name: str, index: int, seed: list[int], spec_hash: str,
     nan = math.nan
     return {"sample": name, "index": index, "seed": list(seed), "spec_hash": spec_hash,
             "status": "error", "error": error, "steps": 0, "passes": False,
-            "fails": ["task error"], "step": -1, "spectral_radius": nan, "dt_mu_max": nan,
+            "fails": ["task error"], "step": -1, "spectral_radius": nan,
+            "mean_square_radius": nan, "dt_mu_max": nan,
             "gain_margin_db": nan, "phase_margin_deg": nan, "delay_margin_steps": nan,
             "worst_mode": "", "ripple": nan, "bus_rate_lag1": nan, "log_digest": "",
             "seconds": nan, "draws": dict(draws), "ran": False, "worker": ""}

@@ -23,15 +23,17 @@ import pyarrow.parquet as pq
 
 from pipeline.analysis.confidence import confidence_verdict, samples_needed
 from pipeline.errors import LogError
+from pipeline.montecarlo.sealed import sealed_json, unseal
 
 TABLE_NAME = "montecarlo.parquet"
 VERDICT_NAME = "verdict.json"
 DRAW = "draw:"
 WORST = 10  # samples listed
 RECORD_COLUMNS = ["sample", "index", "status", "error", "steps", "passes", "fails", "step",
-                  "spectral_radius", "dt_mu_max", "gain_margin_db", "phase_margin_deg",
-                  "delay_margin_steps", "worst_mode", "ripple", "bus_rate_lag1", "log_digest",
-                  "seed", "spec_hash", "ran", "attempts", "seconds", "worker"]
+                  "spectral_radius", "mean_square_radius", "dt_mu_max", "gain_margin_db",
+                  "phase_margin_deg", "delay_margin_steps", "worst_mode", "ripple",
+                  "bus_rate_lag1", "log_digest", "seed", "spec_hash", "ran", "attempts",
+                  "seconds", "worker"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,8 @@ class MonteCarloVerdict:
     failures: int  # samples judged and failing (samples − passes − errored)
     fails_by_part: dict[str, int]
     failing_modes: dict[str, int]  # the mode of least gain margin of each failing sample
+    mean_square_radius_max: float | None  # the largest over the judged samples (eq. 41c); None:
+    # no sample's loop was jittered
     dispersions: dict[str, str]
     worst: list[WorstSample]
     simulated: int  # samples run by this invocation (the others: kept records)
@@ -187,18 +191,21 @@ def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str]
         target_p=p, confidence=c, lower_bound=bound, needed=needed, shown=shown,
         statement=statement, requirement=requirement, failures=len(judged_failing),
         fails_by_part=fails, failing_modes=modes,
+        mean_square_radius_max=(float(ms.max()) if len(ms := df["mean_square_radius"].dropna())
+                                else None),
         dispersions=dispersions, worst=worst_samples(df), simulated=int(df["ran"].sum()),
         wall_s=wall_s)
 
 
 def verdict_json(v: MonteCarloVerdict) -> str:
-    return json.dumps(asdict(v), indent=1, allow_nan=True)
+    """The verdict as JSON, sealed by its content's SHA-256 (:mod:`pipeline.montecarlo.sealed`)."""
+    return sealed_json(asdict(v), indent=1)
 
 
 def read_verdict(path: Path | str) -> MonteCarloVerdict:
     path = Path(path)
     try:
-        d = json.loads(path.read_text())
+        d = unseal(path.read_text())
         d["requirement"] = RequirementWords(**d["requirement"])
         d["worst"] = [WorstSample(**w) for w in d["worst"]]
         return MonteCarloVerdict(**d)

@@ -46,6 +46,42 @@ UNIT = 1.0  # a root of this modulus is on the unit circle: marginal
 
 
 @dataclass(frozen=True)
+class Latency:
+    """The delay of the command as flown (eqs. 29, 41), in steps: ``steps`` whole ones
+    (mission.plant.delay_steps), then the arrival within the step, uniform on
+    [``fraction``, ``fraction`` + ``jitter``) (mission.plant.timing)."""
+
+    steps: int = 0
+    fraction: float = 0.0
+    jitter: float = 0.0
+
+    @classmethod
+    def of(cls, plant) -> Latency:
+        """The latency of a spec's ``mission.plant`` block (none under the reduced plant)."""
+        if plant.model != "sampled":
+            return cls()
+        t = plant.timing
+        return cls(plant.delay_steps, *((0.0, 0.0) if t is None else (t.delay_fraction,
+                                                                       t.jitter)))
+
+    @property
+    def worst(self) -> tuple[int, float]:
+        """(n, δ): the longest delay, n + δ steps (δ in [0, 1)): the frozen loop the margins
+        judge, each margin falling as the delay grows."""
+        total = self.steps + self.fraction + self.jitter
+        n = math.floor(total)
+        return n, total - n
+
+    def words(self) -> str:
+        """The latency in a review's words."""
+        if not self.fraction and not self.jitter:
+            return f"{self.steps} step(s) of delay"
+        spread = (f" to {self.steps + self.fraction + self.jitter:.3g} (jitter "
+                  f"{self.jitter:.3g} step)" if self.jitter else "")
+        return f"{self.steps + self.fraction:.3g}{spread} steps of delay"
+
+
+@dataclass(frozen=True)
 class Complex:
     real: float
     imag: float
@@ -123,21 +159,71 @@ class Margins:
         return self.meets_gain and self.meets_phase and self.meets_delay
 
 
-def gain_margin(g: float, delay: int) -> tuple[float, float]:
-    """(GM, ω_180): the factor on g that makes the loop marginal, at the phase crossover."""
-    w180 = math.pi / (2 * delay + 1)
-    return 2.0 * math.sin(w180 / 2.0) / g, w180
+def loop_response(g: float, delay: int, fraction: float, w: np.ndarray) -> np.ndarray:
+    """L(e^{jω}) = g ((1 − δ) + δ e^{−jω}) e^{−jnω}/(e^{jω} − 1): the mode's loop broken at
+    the command, held and applied n + δ steps late (eqs. 35, 41)."""
+    z = np.exp(1j * np.asarray(w, dtype=float))
+    return g * ((1.0 - fraction) + fraction / z) * z ** (-delay) / (z - 1.0)
 
 
-def phase_margin(g: float, delay: int) -> tuple[float | None, float | None]:
-    """(PM in rad, ω_c), or (None, None) when |L| > 1 at every frequency (g > 2). Not wrapped
-    into (−π, π]: with d ≥ 2 the crossover's phase can lie more than a turn past −π, and the
-    wrapped value (python-control's) then reads positive for an unstable loop (d = 2, g = 1.9:
-    +91° wrapped, −269° here, GM −9.75 dB)."""
-    if g > 2.0:
+def loop_phase(delay: int, fraction: float, w: np.ndarray) -> np.ndarray:
+    """∠L(e^{jω}) unwrapped from −π/2 at ω → 0: −π/2 − ω/2 − nω + ∠((1 − δ) + δ e^{−jω}),
+    the last in [−π, 0] and continuous on (0, π] (eq. 41)."""
+    w = np.asarray(w, dtype=float)
+    return (-0.5 * np.pi - (delay + 0.5) * w
+            + np.arctan2(-fraction * np.sin(w), (1.0 - fraction) + fraction * np.cos(w)))
+
+
+_GRID = 4096  # the frequency scan for a fractional delay's crossovers, then Brent's method
+
+
+def gain_margin(g: float, delay: int, fraction: float = 0.0) -> tuple[float, float]:
+    """(GM, ω_180): the factor on g that makes the loop marginal, at the phase crossover. With
+    a fraction of a step (eq. 41) no closed form: the least −1/L(e^{jω}) over the frequencies
+    where L is real and negative, found by a scan of ω ∈ (0, π) and Brent's method, and ω = π
+    (where L is real: −g (1 − 2δ)(−1)^n/2)."""
+    if not fraction:
+        w180 = math.pi / (2 * delay + 1)
+        return 2.0 * math.sin(w180 / 2.0) / g, w180
+    from scipy.optimize import brentq
+
+    def imag(w: float) -> float:
+        return float(np.sin(loop_phase(delay, fraction, w)))
+
+    candidates = []
+    end = -g * (1.0 - 2.0 * fraction) * (-1) ** delay / 2.0
+    if end < 0.0:
+        candidates.append((-1.0 / end, math.pi))
+    w = np.linspace(0.0, math.pi, _GRID + 1)[1:-1]
+    sign = np.sin(loop_phase(delay, fraction, w))
+    for i in np.flatnonzero(np.sign(sign[:-1]) != np.sign(sign[1:])):
+        wc = brentq(imag, w[i], w[i + 1], xtol=1e-15)
+        L = complex(loop_response(g, delay, fraction, wc))
+        if L.real < 0.0:
+            candidates.append((-1.0 / L.real, wc))
+    return min(candidates) if candidates else (math.inf, math.pi)
+
+
+def phase_margin(g: float, delay: int, fraction: float = 0.0
+                 ) -> tuple[float | None, float | None]:
+    """(PM in rad, ω_c), or (None, None) when |L| > 1 at every frequency (g > 2 without a
+    fraction). Not wrapped into (−π, π]: with d ≥ 2 the crossover's phase can lie more than
+    a turn past −π, and the wrapped value (python-control's) then reads positive for an
+    unstable loop (d = 2, g = 1.9: +91° wrapped, −269° here, GM −9.75 dB). With a fraction of
+    a step (eq. 41) |L| still falls monotonically in ω (its numerator falls, 2 sin(ω/2)
+    grows): its one crossover is found by Brent's method."""
+    if not fraction:
+        if g > 2.0:
+            return None, None
+        wc = 2.0 * math.asin(g / 2.0)
+        return math.pi / 2.0 - (delay + 0.5) * wc, wc
+    if g * abs(1.0 - 2.0 * fraction) / 2.0 >= 1.0:
         return None, None
-    wc = 2.0 * math.asin(g / 2.0)
-    return math.pi / 2.0 - (delay + 0.5) * wc, wc
+    from scipy.optimize import brentq
+
+    wc = brentq(lambda w: float(abs(loop_response(g, delay, fraction, w))) - 1.0,
+                1e-12, math.pi, xtol=1e-15)
+    return float(math.pi + loop_phase(delay, fraction, wc)), wc
 
 
 def _stable(g: float, total: float) -> bool:
@@ -152,15 +238,16 @@ DELAY_HORIZON_STEPS = 16
 _SCAN = 1.0 / 16.0  # steps: the scan's grid before the bisection
 
 
-def delay_margin(g: float, delay: int, dt: float, tol: float = 1e-9) -> tuple[float, bool]:
+def delay_margin(g: float, delay: float, dt: float, tol: float = 1e-9) -> tuple[float, bool]:
     """(τ, beyond): the smallest further delay τ ≥ 0 (s), fractions of a step included, that
     leaves the mode's loop unstable (eq. 35), 0 when it is unstable as flown; scanned from the
     declared delay on a grid of 1/16 step, then bisected to ``tol`` steps. ``beyond``: stable
     over the whole horizon of ``DELAY_HORIZON_STEPS``, τ is then that horizon (a lower
-    bound)."""
+    bound). ``delay`` is the loop's own, in steps, a fraction included (eq. 41)."""
     if not _stable(g, delay):
         return 0.0, False
-    pm, wc = phase_margin(g, delay)
+    n = math.floor(delay)
+    pm, wc = phase_margin(g, n, delay - n)
     # A slow mode: its phase-lag estimate lies beyond the horizon by more than a held command
     # moves it (under a step), and the loop is stable at the horizon: no scan needed.
     if (pm is not None and wc and pm / wc > DELAY_HORIZON_STEPS + 2
@@ -187,12 +274,14 @@ class Requirement:
     delay_margin_steps: float
 
 
-def margins(g: float, delay: int, dt: float, req: Requirement) -> Margins:
-    """Gain, phase and delay margins of the loop L(z) = g z^{−d}/(z − 1) (eq. 35) against
+def margins(g: float, delay: int, dt: float, req: Requirement, fraction: float = 0.0
+            ) -> Margins:
+    """Gain, phase and delay margins of the loop L(z) = g z^{−d}/(z − 1) (eq. 35), or with a
+    command arriving ``fraction`` of a step later (:func:`loop_response`, eq. 41), against
     ``req``."""
-    gm, w180 = gain_margin(g, delay)
-    pm, wc = phase_margin(g, delay)
-    dm, beyond = delay_margin(g, delay, dt)
+    gm, w180 = gain_margin(g, delay, fraction)
+    pm, wc = phase_margin(g, delay, fraction)
+    dm, beyond = delay_margin(g, delay + fraction, dt)
     gm_db = 20.0 * math.log10(gm)
     pm_deg = None if pm is None else math.degrees(pm)
     return Margins(
@@ -220,12 +309,12 @@ class RequirementFix:
     steps_per_s: float  # cost: control steps per second of mission
 
 
-def _meets_fast(g: float, delay: int, req: Requirement) -> bool:
-    """Whether a mode's loop meets ``req``: the closed forms of GM and PM, and stability with
-    the required further delay (the delay margin's test at its one point)."""
-    gm, _ = gain_margin(g, delay)
-    pm, _ = phase_margin(g, delay)
-    total = delay + req.delay_margin_steps
+def _meets_fast(g: float, delay: int, req: Requirement, fraction: float = 0.0) -> bool:
+    """Whether a mode's loop meets ``req``: GM and PM (closed forms without a fraction), and
+    stability with the required further delay (the delay margin's test at its one point)."""
+    gm, _ = gain_margin(g, delay, fraction)
+    pm, _ = phase_margin(g, delay, fraction)
+    total = delay + fraction + req.delay_margin_steps
     n = int(np.floor(total))
     return bool(20 * np.log10(gm) >= req.gain_margin_db and pm is not None
                 and np.degrees(pm) >= req.phase_margin_deg
@@ -233,9 +322,9 @@ def _meets_fast(g: float, delay: int, req: Requirement) -> bool:
 
 
 def _all_meet(mus: np.ndarray, dt: float, integrator: str, delay: int,
-              req: Requirement) -> bool:
+              req: Requirement, fraction: float = 0.0) -> bool:
     # Every margin of eq. 35 falls as g grows, and g grows with μ: the fastest mode decides.
-    return _meets_fast(loop_gain(dt * float(np.max(mus)), integrator), delay, req)
+    return _meets_fast(loop_gain(dt * float(np.max(mus)), integrator), delay, req, fraction)
 
 
 def _bisect_largest(ok, lo: float, hi: float, rtol: float = 1e-9) -> float | None:
@@ -253,11 +342,11 @@ def _bisect_largest(ok, lo: float, hi: float, rtol: float = 1e-9) -> float | Non
 
 def _fix(change: str, value: float | None, M: np.ndarray, D: np.ndarray, dt: float,
          integrator: str, delay: int, req: Requirement,
-         gains: dict[str, float] | None = None) -> RequirementFix:
+         gains: dict[str, float] | None = None, fraction: float = 0.0) -> RequirementFix:
     # Every margin of eq. 35 falls as g grows: the fastest mode has the least of each, and
     # every mode meets the requirement exactly when it does.
     fastest = damping_modes(M, D)[0]
-    m = margins(loop_gain(dt * fastest.mu, integrator), delay, dt, req)
+    m = margins(loop_gain(dt * fastest.mu, integrator), delay, dt, req, fraction)
     return RequirementFix(change=change, value=value, gains=gains or {}, meets=m.meets,
                           worst_mode=fastest.name, gain_margin_db=m.gain_margin_db,
                           phase_margin_deg=m.phase_margin_deg,
@@ -265,27 +354,32 @@ def _fix(change: str, value: float | None, M: np.ndarray, D: np.ndarray, dt: flo
 
 
 def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: str,
-                      delay: int, req: Requirement) -> list[RequirementFix]:
+                      delay: int, req: Requirement, fraction: float = 0.0
+                      ) -> list[RequirementFix]:
     """The loop as it is, and three changes against the requirement at its plant and delay
     (eq. 35): the implicit damping at this step; the largest step at which every mode meets
     it; the damping gains cut, block by block, to the largest at which every mode that block
-    sets (its largest share) meets it."""
+    sets (its largest share) meets it. ``fraction``: the command's arrival within the step
+    (eq. 41), the loop's delay being ``delay`` + ``fraction`` steps."""
     def mus(D: np.ndarray) -> np.ndarray:
         return np.array([m.mu for m in damping_modes(M_breve, D)])
 
     base = mus(D_breve)
-    out = [_fix("as flown", None, M_breve, D_breve, dt, integrator, delay, req)]
+    out = [_fix("as flown", None, M_breve, D_breve, dt, integrator, delay, req,
+                fraction=fraction)]
     if integrator == "explicit":
         out.append(_fix("controller.integrator: imex", None, M_breve, D_breve, dt, "imex",
-                        delay, req))
-    dt_ok = _bisect_largest(lambda h: _all_meet(base, h, integrator, delay, req), 1e-6, dt)
+                        delay, req, fraction=fraction))
+    dt_ok = _bisect_largest(lambda h: _all_meet(base, h, integrator, delay, req, fraction),
+                            1e-6, dt)
     out.append(_fix(f"mission.dt ≤ {dt_ok:.4g} s" if dt_ok else "mission.dt: none suffices",
-                    dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req))
+                    dt_ok, M_breve, D_breve, dt_ok or dt, integrator, delay, req,
+                    fraction=fraction))
     D, cuts = D_breve.copy(), {}
     for b, sl in enumerate(block_slices(len(D_breve))):
         block = GAIN_BLOCKS[b]
         def block_meets(d: float, b: int = b, D: np.ndarray = D) -> bool:
-            return all(_meets_fast(loop_gain(dt * m.mu, integrator), delay, req)
+            return all(_meets_fast(loop_gain(dt * m.mu, integrator), delay, req, fraction)
                        for m in damping_modes(M_breve, with_gain(D, b, d)) if m.block == b)
 
         now = float(D[sl.start, sl.start])
@@ -305,5 +399,5 @@ def requirement_fixes(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integ
                     "controller.gains: as they are" if out[0].meets else
                     "controller.gains: no cut of the damping gains suffices",
                     None, M_breve, D if cuts else D_breve, dt, integrator, delay, req,
-                    gains=cuts))
+                    gains=cuts, fraction=fraction))
     return out

@@ -41,8 +41,14 @@ from pipeline.sim.forward_dynamics import rigid_tree
 from pipeline.sim.layout import pack
 from pipeline.sim.limits import breve_bounds
 from pipeline.sim.linalg import matvec
-from pipeline.sim.margins import Requirement, RequirementFix, gain_margin, requirement_fixes
-from pipeline.sim.plant import held_command, integrate_held, limit_bus_torque
+from pipeline.sim.margins import (
+    Latency,
+    Requirement,
+    RequirementFix,
+    gain_margin,
+    requirement_fixes,
+)
+from pipeline.sim.plant import held_command, integrate_held, integrate_split, limit_bus_torque
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.robot_file import check_null_space
 from pipeline.sim.rotations import quat_from_matrix
@@ -113,7 +119,8 @@ class Mission:
         # The sampled-data plant's own Pinocchio data and its held command (eq. 29).
         self._plant_data = self.robot.model.createData()
         self._tree = rigid_tree(self.robot.model)  # the compiled plant's model (eq. 29)
-        self._held: np.ndarray | None = None
+        self._held: list[np.ndarray] | None = None
+        self._arrivals: np.random.Generator | None = None  # ξ_k of eq. 41
         # The sampled plant's own state, which the controller sees through its sensors
         # (eq. 40); None: the state the controller holds (no sensors, or the first step).
         self._true: tuple[np.ndarray, np.ndarray] | None = None
@@ -152,17 +159,18 @@ class Mission:
         # makes the same contiguous copy itself).
         mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
         integrator, plant = self.spec.controller.integrator, self.spec.mission.plant
+        delay, fraction = Latency.of(plant).worst  # the longest delay flown (eq. 41)
         return critical_step(mu_max), bisect_critical_step(
-            M, D, K_x, J_x, integrator, plant=plant.model, delay=plant.delay_steps)
+            M, D, K_x, J_x, integrator, plant=plant.model, delay=delay, fraction=fraction)
 
     def guard_fix(self, s: LoopState) -> tuple[str, str]:
         """(the fastest damping mode's name, what meets the spec's requirement on the loop as
         flown) at state ``s`` (eqs. 21, 35): the guard's messages, off the per-step path."""
         M, D, _, _ = self.linearised_loop(s)
         spec = self.spec
-        fixes = requirement_fixes(M, D, self.dt, spec.controller.integrator,
-                                  spec.mission.plant.delay_steps,
-                                  Requirement(**spec.requirements.model_dump()))
+        delay, fraction = Latency.of(spec.mission.plant).worst
+        fixes = requirement_fixes(M, D, self.dt, spec.controller.integrator, delay,
+                                  Requirement(**spec.requirements.model_dump()), fraction)
         return damping_modes(M, D)[0].name, fix_text(fixes, requirement_words(spec))
 
     def linearised_loop(self, s: LoopState) -> tuple[np.ndarray, ...]:
@@ -176,8 +184,7 @@ class Mission:
             task_errors(T, self.guidance.reference(s.tau, T.p_b), gamma, s.v_c).J_x,
             shape.n_breve)
         K, D = block_gains(ctrl, gamma, shape.null_space_dim)
-        K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl.gains.posture,
-                             0.0 if ctrl.null_space is None else ctrl.null_space.K)
+        K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl)
         return np.asarray(T.reduced_inertia), D, K_x, J_x
 
     def controller_vector(self) -> np.ndarray:
@@ -224,21 +231,39 @@ class Mission:
               v_k: np.ndarray) -> bool:
         """The sampled-data plant (eq. 29): the step's commanded generalized force (the row's
         ``u_cmd``, from the kernel), held (``delay_steps`` late, the bus torque saturated to
-        ``bus_torque_max``) while the robot's forward dynamics move it over dt; the row's
-        ``u_applied`` is what the plant received, and the controller then measures
-        ν = Γ(q) v. Whether the state is finite."""
+        ``bus_torque_max``) while the robot's forward dynamics move it over dt; with
+        ``timing`` (eq. 41) it arrives δ_k·dt into the step, the one before held until then.
+        The row's ``u_applied`` is what the plant received (its mean over a split step), and
+        the controller then measures ν = Γ(q) v. Whether the state is finite."""
         model, data, plant = self.robot.model, self._plant_data, self.spec.mission.plant
         at, row_at = self.layout.state, self.layout.row
         tau = row[row_at["u_cmd"]].copy()
         if not np.all(np.isfinite(tau)):
             return False
-        if plant.delay_steps:
+        # The commands computed and not yet wholly applied, oldest first: d of them, and with
+        # a command arriving within the step (eq. 41) the one it replaces there.
+        waiting = plant.delay_steps + (plant.timing is not None)
+        if waiting:
             if self._held is None:  # before the first command: the one that holds v_0
-                self._held = held_command(model, data, q_k, v_k, np.zeros_like(v_k))
-            tau, self._held = self._held, tau
+                self._held = [held_command(model, data, q_k, v_k, np.zeros_like(v_k))] * waiting
+            self._held.append(tau)
+            tau = self._held.pop(0)
         tau, _ = limit_bus_torque(tau, plant.bus_torque_max)
-        row[row_at["u_applied"]] = tau
-        q, v, excursion = integrate_held(self._tree, q_k, v_k, tau, self.dt, plant.substeps)
+        if plant.timing is None:
+            row[row_at["u_applied"]] = tau
+            q, v, excursion = integrate_held(self._tree, q_k, v_k, tau, self.dt,
+                                             plant.substeps)
+        else:  # τ_{k−d−1} until the arrival δ_k·dt, then τ_{k−d} (eq. 41)
+            arrival = self._arrival()
+            after, _ = limit_bus_torque(self._held[0], plant.bus_torque_max)
+            if arrival == 0.0:  # at the instant: the whole hold, the same bits as no timing
+                row[row_at["u_applied"]] = after
+                q, v, excursion = integrate_held(self._tree, q_k, v_k, after, self.dt,
+                                                 plant.substeps)
+            else:
+                row[row_at["u_applied"]] = arrival * tau + (1.0 - arrival) * after  # the mean
+                q, v, excursion = integrate_split(self._tree, q_k, v_k, tau, after, self.dt,
+                                                  arrival, plant.substeps)
         if not (math.isfinite(q @ self._zero_q) and math.isfinite(v @ v)):
             return False
         row[row_at["attitude_excursion_deg"].start] = math.degrees(excursion)
@@ -251,10 +276,20 @@ class Mission:
         return True
 
     def _start_sensors(self) -> None:
-        """A fresh plant state and sensor stream (eq. 40) for a run or a single step."""
-        sensors = self.spec.mission.plant.sensors
+        """A fresh plant state, sensor stream (eq. 40) and arrival stream (eq. 41) for a run or
+        a single step."""
+        sensors, timing = self.spec.mission.plant.sensors, self.spec.mission.plant.timing
         self._true = None
         self._sensors = None if sensors is None else Measurement(sensors, self.dt)
+        self._arrivals = (None if timing is None or not timing.jitter else
+                          np.random.default_rng(np.random.SeedSequence([timing.seed])))
+
+    def _arrival(self) -> float:
+        """δ_k: where within this step its command reaches the plant, in steps (eq. 41)."""
+        timing = self.spec.mission.plant.timing
+        if self._arrivals is None:
+            return timing.delay_fraction
+        return timing.delay_fraction + timing.jitter * float(self._arrivals.random())
 
     def step(self, s: LoopState) -> tuple[LoopState, dict]:
         """One controller step from state ``s`` (eq. 22's update order, the limits of eq. 16,
@@ -318,9 +353,11 @@ class Mission:
         # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
         # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
         dt_damping, dt_map = self.critical_steps(s0)
-        integrator, delay = self.spec.controller.integrator, self.spec.mission.plant.delay_steps
-        # Forward Euler's bound on dt·μ with the plant's delay: g at a gain margin of 1 (eq. 35).
-        bound = gain_margin(1.0, delay)[0]
+        integrator = self.spec.controller.integrator
+        delay, fraction = Latency.of(self.spec.mission.plant).worst
+        # Forward Euler's bound on dt·μ with the plant's delay: g at a gain margin of 1 (eqs.
+        # 35, 41), at the longest delay flown.
+        bound = gain_margin(1.0, delay, fraction)[0]
         if dt_map is not None and self.dt >= dt_map:
             mode, fix = self.guard_fix(s0)
             warned.append(map_warning(self.dt, dt_map, dt_damping, integrator, mode, fix))
@@ -344,8 +381,8 @@ class Mission:
                     return result("failed", k, k, f"step {k}: {why}")
                 if explicit and not warned and rows[i, dt_mu_at] > bound:
                     mode, fix = self.guard_fix(row_state(layout, rows[i]))
-                    warned.append(stability_warning(k, float(rows[i, dt_mu_at]), bound, delay,
-                                                    mode, fix))
+                    warned.append(stability_warning(k, float(rows[i, dt_mu_at]), bound,
+                                                    delay + fraction, mode, fix))
                 clipped = clipped + 1 if rows[i, v_max_at] > 0.5 else 0
                 if clipped >= DIVERGENCE_STEPS:
                     flush(i + 1)
@@ -387,7 +424,7 @@ def requirement_words(spec: Spec) -> str:
     """The spec's requirement and the loop it is judged on (eq. 35), for messages."""
     r, plant = spec.requirements, spec.mission.plant
     loop = ("the simulator's update" if plant.model == "reduced" else
-            f"the sampled-data plant with {plant.delay_steps} step(s) of delay")
+            f"the sampled-data plant with {Latency.of(plant).words()}")
     return (f"GM ≥ {r.gain_margin_db:g} dB, PM ≥ {r.phase_margin_deg:g}°, DM ≥ "
             f"{r.delay_margin_steps:g} step on {loop}")
 
@@ -425,10 +462,10 @@ def map_warning(dt: float, dt_map: float, dt_damping: float, integrator: str, mo
             f"{integrator} integrator: the loop is unstable. {fix}")
 
 
-def stability_warning(step: int, dt_mu_max: float, bound: float, delay: int, mode: str,
+def stability_warning(step: int, dt_mu_max: float, bound: float, delay: float, mode: str,
                       fix: str) -> str:
     """The online guard's one message (eqs. 21, 35): the mode at that step, forward Euler's
     bound with the plant's delay, and what meets the requirement."""
     return (f"step {step}: dt·μ_max = {dt_mu_max:.3g} > {bound:.3g} (forward Euler's bound "
-            f"with {delay} step(s) of delay, eq. 35): the {mode} mode's velocity damping is "
+            f"with {delay:g} step(s) of delay, eq. 35): the {mode} mode's velocity damping is "
             f"unstable. {fix}")

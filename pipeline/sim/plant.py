@@ -103,6 +103,26 @@ def limit_bus_torque(tau: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
 
 
 @jit
+def _rk4_step(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
+              h: float) -> tuple[np.ndarray, np.ndarray]:
+    """One classical RK4 step of length h on (q, v) under the held force τ (eq. 29), each
+    stage's quaternion normalised before it is used and the result's after the step."""
+    q1 = _normalised(q)
+    dq1, dv1 = configuration_rate(q1, v), forward_dynamics(tree, q1, v, tau)
+    q2 = _normalised(q + 0.5 * h * dq1)
+    v2 = v + 0.5 * h * dv1
+    dq2, dv2 = configuration_rate(q2, v2), forward_dynamics(tree, q2, v2, tau)
+    q3 = _normalised(q + 0.5 * h * dq2)
+    v3 = v + 0.5 * h * dv2
+    dq3, dv3 = configuration_rate(q3, v3), forward_dynamics(tree, q3, v3, tau)
+    q4 = _normalised(q + h * dq3)
+    v4 = v + h * dv3
+    dq4, dv4 = configuration_rate(q4, v4), forward_dynamics(tree, q4, v4, tau)
+    return (_normalised(q + h / 6.0 * (dq1 + 2.0 * dq2 + 2.0 * dq3 + dq4)),
+            v + h / 6.0 * (dv1 + 2.0 * dv2 + 2.0 * dv3 + dv4))
+
+
+@jit
 def integrate_held(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndarray,
                    dt: float, substeps: int) -> tuple[np.ndarray, np.ndarray, float]:
     """(q, v) after dt under the held generalized force τ (eq. 29), and the bus attitude's
@@ -115,21 +135,33 @@ def integrate_held(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndarra
     path = np.empty((substeps, 4))
     start = _normalised(q)[3:7]
     for k in range(substeps):
-        q1 = _normalised(q)
-        dq1, dv1 = configuration_rate(q1, v), forward_dynamics(tree, q1, v, tau)
-        q2 = _normalised(q + 0.5 * h * dq1)
-        v2 = v + 0.5 * h * dv1
-        dq2, dv2 = configuration_rate(q2, v2), forward_dynamics(tree, q2, v2, tau)
-        q3 = _normalised(q + 0.5 * h * dq2)
-        v3 = v + 0.5 * h * dv2
-        dq3, dv3 = configuration_rate(q3, v3), forward_dynamics(tree, q3, v3, tau)
-        q4 = _normalised(q + h * dq3)
-        v4 = v + h * dv3
-        dq4, dv4 = configuration_rate(q4, v4), forward_dynamics(tree, q4, v4, tau)
-        q = _normalised(q + h / 6.0 * (dq1 + 2.0 * dq2 + 2.0 * dq3 + dq4))
-        v = v + h / 6.0 * (dv1 + 2.0 * dv2 + 2.0 * dv3 + dv4)
+        q, v = _rk4_step(tree, q, v, tau, h)
         path[k] = q[3:7]
     return q, v, attitude_excursion(start, path)
+
+
+@jit
+def integrate_split(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau_before: np.ndarray,
+                    tau_after: np.ndarray, dt: float, split: float, substeps: int
+                    ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(q, v) after dt when the command arrives within the step (eq. 41): τ_before held for
+    the first ``split``·dt, then τ_after for the rest, each piece in RK4 steps of at most
+    dt/``substeps`` (at least one), and the bus attitude's excursion over the whole step
+    (:func:`attitude_excursion_timed`)."""
+    first = max(1, math.ceil(substeps * split))
+    second = max(1, math.ceil(substeps * (1.0 - split)))
+    h1, h2 = split * dt / first, (1.0 - split) * dt / second
+    path = np.empty((first + second, 4))
+    times = np.empty(first + second)
+    start = _normalised(q)[3:7]
+    for k in range(first):
+        q, v = _rk4_step(tree, q, v, tau_before, h1)
+        path[k], times[k] = q[3:7], split * (k + 1) / first
+    for k in range(second):
+        q, v = _rk4_step(tree, q, v, tau_after, h2)
+        path[first + k] = q[3:7]
+        times[first + k] = split + (1.0 - split) * (k + 1) / second
+    return q, v, attitude_excursion_timed(start, path, times)
 
 
 @jit
@@ -155,6 +187,30 @@ def _angle(a: np.ndarray) -> float:
 
 
 @jit
+def _chord(q_start: np.ndarray, path_end: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(rel, |ε_rel|, θ): the rotation from ``q_start`` to ``path_end`` the shorter way
+    round, its vector part's norm and its angle."""
+    rel = _quat_product(_conjugate(q_start), path_end)
+    if rel[3] < 0.0:  # the shorter way round
+        rel = -rel
+    s = math.sqrt(rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2])
+    return rel, s, 2.0 * math.atan2(s, rel[3])
+
+
+@jit
+def _off_geodesic(q_start: np.ndarray, rel: np.ndarray, s: float, half: float,
+                  point: np.ndarray) -> float:
+    """The angle between ``point`` and the geodesic's attitude at half-angle ``half``."""
+    step = np.zeros(4)
+    step[3] = math.cos(half)
+    if s > 0.0:
+        for i in range(3):
+            step[i] = rel[i] / s * math.sin(half)
+    geodesic = _quat_product(q_start, step)
+    return _angle(_quat_product(_conjugate(geodesic), point))
+
+
+@jit
 def attitude_excursion(q_start: np.ndarray, path: np.ndarray) -> float:
     """The largest angle (rad) between the bus attitude along ``path`` (the unit quaternions
     (x, y, z, w) at equal substeps of one control step, the last at its end) and the geodesic
@@ -163,19 +219,23 @@ def attitude_excursion(q_start: np.ndarray, path: np.ndarray) -> float:
     update of eq. 15 makes, has none; under a held torque about a principal axis the rate
     ramps from ω_k to ω_{k+1} and the excursion is |ω_{k+1} − ω_k| dt/8, at mid-step."""
     n = path.shape[0]
-    rel = _quat_product(_conjugate(q_start), path[n - 1])
-    if rel[3] < 0.0:  # the shorter way round
-        rel = -rel
-    s = math.sqrt(rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2])
-    theta = 2.0 * math.atan2(s, rel[3])
+    rel, s, theta = _chord(q_start, path[n - 1])
     worst = 0.0
     for j in range(1, n):
         half = 0.5 * theta * j / n
-        step = np.zeros(4)
-        step[3] = math.cos(half)
-        if s > 0.0:
-            for i in range(3):
-                step[i] = rel[i] / s * math.sin(half)
-        geodesic = _quat_product(q_start, step)
-        worst = max(worst, _angle(_quat_product(_conjugate(geodesic), path[j - 1])))
+        worst = max(worst, _off_geodesic(q_start, rel, s, half, path[j - 1]))
+    return worst
+
+
+@jit
+def attitude_excursion_timed(q_start: np.ndarray, path: np.ndarray, times: np.ndarray
+                             ) -> float:
+    """:func:`attitude_excursion` for a path at unequal times (``times``: each point's
+    fraction of the step, the last 1), as a step split by a command's arrival makes
+    (eq. 41)."""
+    n = path.shape[0]
+    rel, s, theta = _chord(q_start, path[n - 1])
+    worst = 0.0
+    for j in range(n - 1):
+        worst = max(worst, _off_geodesic(q_start, rel, s, 0.5 * theta * times[j], path[j]))
     return worst

@@ -72,8 +72,8 @@ PLANTS = ("reduced", "sampled")
 
 
 def flown_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np.ndarray,
-              dt: float, integrator: str, plant: str = "reduced", delay: int = 0
-              ) -> np.ndarray:
+              dt: float, integrator: str, plant: str = "reduced", delay: int = 0,
+              fraction: float = 0.0) -> np.ndarray:
     """Φ of the loop as flown (eq. 34): the integrator's command, the plant that moves the
     robot between two instants, and ``delay`` steps of computation delay.
 
@@ -82,14 +82,18 @@ def flown_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np
     hold), its velocity increment p_k = e_cmd,k − e_k = B x̃_k + (A_e − I) e_k applied
     ``delay`` instants late, e_{k+1} = e_k + p_{k−d}, x̃_{k+1} = x̃_k + dt J_x (e_k + e_{k+1})/2.
     The state is z = [x̃; e] (18), and with a delay the increments computed and not yet
-    applied, oldest first: w = [x̃; e; p_{k−d}; …; p_{k−1}] (18 + 9d)."""
+    applied, oldest first: w = [x̃; e; p_{k−d}; …; p_{k−1}] (18 + 9d). With ``fraction`` δ > 0
+    the command arrives δ·dt into the step (eq. 41): :func:`split_map_terms` at that δ."""
     n = M_breve.shape[0]
     if plant == "reduced":
-        if delay:
+        if delay or fraction:
             raise ValueError("the reduced plant (the simulator's update) has no delay")
         return discrete_map(M_breve, D_breve, K_x, J_x, dt, integrator)
     if plant != "sampled":
         raise ValueError(f"unknown plant {plant!r} (one of {', '.join(PLANTS)})")
+    if fraction:
+        A0, A1, A2 = split_map_terms(M_breve, D_breve, K_x, J_x, dt, integrator, delay)
+        return A0 + fraction * A1 + fraction**2 * A2
     A_e, B = command_map(M_breve, D_breve, K_x, dt, integrator)
     eye = np.eye(n)
     increment = np.hstack([B, A_e - eye])  # p_k from z_k
@@ -105,6 +109,75 @@ def flown_map(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray, J_x: np
         Phi[2 * n + j * n:3 * n + j * n, 3 * n + j * n:4 * n + j * n] = eye
     Phi[size - n:, :2 * n] = increment  # the newest slot: this step's increment
     return Phi
+
+
+def split_map_terms(M_breve: np.ndarray, D_breve: np.ndarray, K_x: np.ndarray,
+                    J_x: np.ndarray, dt: float, integrator: str, delay: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A₀, A₁, A₂) with Φ(δ) = A₀ + δ A₁ + δ² A₂, the sampled loop's map when step k's
+    command arrives (d + δ)·dt after its instant (eq. 41). The step holds p_{k−d−1} for δ·dt,
+    then p_{k−d}:
+
+        e_{k+1} = e_k + δ p_{k−d−1} + (1 − δ) p_{k−d}
+        x̃_{k+1} = x̃_k + dt J_x (e_k + (δ − δ²/2) p_{k−d−1} + (1 − δ)²/2 p_{k−d})
+
+    (the integral of the piecewise-linear e over the step), on the state
+    w = [x̃; e; p_{k−d−1}; …; p_{k−1}] (18 + 9(d + 1)); p_{k−d} is this step's increment
+    when d = 0."""
+    n = M_breve.shape[0]
+    A_e, B = command_map(M_breve, D_breve, K_x, dt, integrator)
+    eye, hJ = np.eye(n), dt * J_x
+    size = 2 * n + (delay + 1) * n
+    increment = np.zeros((n, size))
+    increment[:, :2 * n] = np.hstack([B, A_e - eye])  # p_k from w_k
+    slot = [slice(2 * n + j * n, 3 * n + j * n) for j in range(delay + 1)]
+    if delay == 0:
+        after = increment
+    else:
+        after = np.zeros((n, size))
+        after[:, slot[1]] = eye
+    before = np.zeros((n, size))
+    before[:, slot[0]] = eye
+    x, e = slice(0, n), slice(n, 2 * n)
+    A0, A1, A2 = np.zeros((size, size)), np.zeros((size, size)), np.zeros((size, size))
+    A0[x, x], A0[x, e] = eye, hJ
+    A0[x] += 0.5 * hJ @ after
+    A0[e, e] = eye
+    A0[e] += after
+    for j in range(delay):  # the queue moves up by one slot
+        A0[slot[j], slot[j + 1]] = eye
+    A0[slot[delay]] = increment  # the newest slot: this step's increment
+    A1[x] = hJ @ (before - after)
+    A1[e] = before - after
+    A2[x] = 0.5 * hJ @ (after - before)
+    return A0, A1, A2
+
+
+def uniform_moments(low: float, high: float, order: int) -> np.ndarray:
+    """E[δ^m], m = 0 … ``order``, of δ uniform on [low, high] (a point when they are equal)."""
+    m = np.arange(order + 1)
+    if high == low:
+        return float(low) ** m
+    return (high ** (m + 1) - low ** (m + 1)) / ((m + 1) * (high - low))
+
+
+def mean_square_radius(terms: tuple[np.ndarray, ...], low: float, high: float) -> float:
+    """ρ_ms = √ρ(E[Φ(δ) ⊗ Φ(δ)]) for δ drawn afresh each step, uniform on [low, high]
+    (eq. 41c): the loop with a jittered arrival is stable in mean square (E‖w_k‖² → 0) iff
+    ρ_ms < 1; without jitter it is the map's own spectral radius. The second-moment map
+    P ↦ Σ_ij E[δ^{i+j}] A_i P A_jᵀ is completely positive, so its spectral radius is an
+    eigenvalue with a positive semi-definite eigenvector: it is taken on the symmetric
+    matrices (their upper triangles, n(n + 1)/2 of them), by LAPACK's dense eigensolver (the
+    slow modes' products cluster at the top, where a Krylov method stalls)."""
+    size = terms[0].shape[0]
+    moments = uniform_moments(low, high, 2 * (len(terms) - 1))
+    S = sum(moments[i + j] * np.kron(Ai, Aj) for i, Ai in enumerate(terms)
+            for j, Aj in enumerate(terms))
+    iu, ju = np.triu_indices(size)
+    rows = S[iu * size + ju]  # the image's upper triangle …
+    # … of a symmetric P from its upper triangle: P_ab and P_ba both for a ≠ b.
+    sym = rows[:, iu * size + ju] + np.where(iu != ju, 1.0, 0.0) * rows[:, ju * size + iu]
+    return float(np.sqrt(np.max(np.abs(np.linalg.eigvals(sym)))))
 
 
 @dataclass(frozen=True)
@@ -124,16 +197,17 @@ def spectrum(Phi: np.ndarray) -> MapSpectrum:
 
 def bisect_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
                          lo: float = 1e-6, hi: float = 1.0, tol: float = 1e-10,
-                         plant: str = "reduced", delay: int = 0) -> float | None:
-    """Smallest dt in [lo, hi] with spectral radius of the flown map Φ(dt) (eq. 34) reaching
-    1, by bisection.
+                         plant: str = "reduced", delay: int = 0, fraction: float = 0.0
+                         ) -> float | None:
+    """Smallest dt in [lo, hi] with spectral radius of the flown map Φ(dt) (eq. 34; a
+    command arriving ``fraction`` of a step later, eq. 41) reaching 1, by bisection.
 
     Assumes ρ(Φ(lo)) < 1 (a stable small step); returns None if ρ(Φ(hi)) < 1 (no bound in
     range, as for imex). The radius crosses 1 once on this bracket for a damped loop.
     """
     def radius(dt: float) -> float:
         return spectrum(flown_map(M_breve, D_breve, K_x, J_x, dt, integrator, plant,
-                                  delay)).spectral_radius
+                                  delay, fraction)).spectral_radius
 
     if radius(hi) < 1.0:
         return None
@@ -177,11 +251,14 @@ def mode_stiffness(K_breve: np.ndarray, ctrl, shape) -> np.ndarray:
 
 
 def loop_stiffness(J_x: np.ndarray, K_breve: np.ndarray, gamma_inv: np.ndarray,
-                   k_posture: float, k_null: float = 0.0) -> np.ndarray:
+                   ctrl) -> np.ndarray:
     """K_x, the stiffness in the map's position coordinates (eqs. 13, 22, 37f): J_xᵀK̆ on the
-    task error, the posture spring, and a redundant arm's null-space spring K_n Z̃ᵀ(q − q̄) in
-    ν_n's rows; ``J_x`` from :func:`position_jacobian` (q − q̄ moves by Γ⁻¹[6:, 3:] per unit of
-    the coordinates v̆ integrates)."""
+    task error, the posture spring (``ctrl.gains.posture``), and a redundant arm's null-space
+    spring K_n Z̃ᵀ(q − q̄) in ν_n's rows (``ctrl.null_space.K``); ``ctrl`` the spec's
+    ``controller`` block, ``J_x`` from :func:`position_jacobian` (q − q̄ moves by Γ⁻¹[6:, 3:]
+    per unit of the coordinates v̆ integrates)."""
+    k_posture = ctrl.gains.posture
+    k_null = 0.0 if ctrl.null_space is None else ctrl.null_space.K
     n, task = J_x.shape[0], K_breve.shape[0]
     if n == task:
         return J_x.T @ K_breve + posture_stiffness(gamma_inv, k_posture, J_x)

@@ -32,6 +32,19 @@ class BackgroundJob:
     log: Path | None = None
     t0: float = 0.0
 
+    def start(self, cmd: list[str], log: Path, what: str) -> None:
+        """Run ``cmd`` in the background, its output (both streams) in ``log``, and say so
+        (``what``: its size in words). The process ends with the command that started it,
+        kill -9 included (:mod:`pipeline.orphans`)."""
+        self.log = log
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with open(log, "wb") as f:
+            self.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT,
+                                            env=child_environment())
+        self.t0 = time.perf_counter()
+        say(f"{self.stage} {self.name}: started in the background ({what}) -> "
+            f"{display_path(log)}")
+
     def stop(self) -> None:
         """End the process if still running (the claims failed before they needed it)."""
         if self.process is not None and self.process.poll() is None:
@@ -79,15 +92,8 @@ def start_sweep(spec: str, sets: list[str], name: str, logs: Path, out: Path,
            "--logs", str(logs), "--out", str(out), "--workers", str(workers)]
     for s in sets:
         cmd += ["--set", s]
-    job.log = plan.table_path.parent / "sweep.log"
-    job.log.parent.mkdir(parents=True, exist_ok=True)
-    with open(job.log, "wb") as f:
-        # The sweep ends with this command (kill -9 included): pipeline.orphans.
-        job.process = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT,
-                                       env=child_environment())
-    job.t0 = time.perf_counter()
-    say(f"sweep {name}: started in the background ({len(plan.points)} points, {workers} "
-        f"worker{'s' if workers != 1 else ''}) -> {display_path(job.log)}")
+    job.start(cmd, plan.table_path.parent / "sweep.log",
+              f"{len(plan.points)} points, {workers} worker{'s' if workers != 1 else ''}")
     return job
 
 

@@ -122,6 +122,52 @@ def _margins() -> Outcome:
                    "DM for each with a phase margin", max(diffs), 1e-10, "; ".join(parts))
 
 
+@check("41", "margins of a mode's loop with its command arriving a fraction δ of a step late, "
+       "L(z) = g((1 − δ)z + δ)/(z^{n+1}(z − 1)), vs independent computations: a time-domain "
+       "simulation of the held loop growing at 1.01 × GM and decaying at 0.99 × GM, |L| and ∠L "
+       "at ω_c by complex arithmetic", "pipeline.sim.margins.margins")
+def _fractional_margins() -> Outcome:
+    from pipeline.sim import margins as mg
+
+    req = mg.Requirement(6.0, 30.0, 1.0)
+    diffs, parts = [], []
+    for g, n, frac in ((1.2, 0, 0.3), (0.5, 1, 0.4), (0.8, 0, 0.7), (0.3, 1, 0.9)):
+        m = mg.margins(g, n, 1.0, req, frac)
+        gm = 10 ** (m.gain_margin_db / 20)
+        below, above = (_held_loop_grows(0.99 * gm * g, n + frac),
+                        _held_loop_grows(1.01 * gm * g, n + frac))
+        if not below < 1.0 < above:
+            raise AssertionError(f"g {g}, delay {n + frac}: the held loop's growth at 0.99 and "
+                                 f"1.01 × GM {gm:.4g}: {below:.3g}, {above:.3g}")
+        z = np.exp(1j * m.gain_crossover)
+        L = g * ((1 - frac) * z + frac) / (z ** (n + 1) * (z - 1.0))
+        diffs += [abs(abs(L) - 1.0),
+                  abs((np.degrees(np.angle(L)) + 180.0) % 360.0 - m.phase_margin_deg)]
+        parts.append(f"g {g:g}, delay {n + frac:g}: GM {m.gain_margin_db:.3g} dB, PM "
+                     f"{m.phase_margin_deg:.3g}°")
+    return Outcome("four loops (g, n + δ); the simulation decays at 0.99 × GM and grows at "
+                   "1.01 × GM for each", max(diffs), 1e-9, "; ".join(parts))
+
+
+@check("41c", "mean-square radius of a loop whose arrival δ is drawn afresh each step, uniform, "
+       "vs √ρ of E[Φ ⊗ Φ] formed densely with numpy's kron at Gauss–Legendre nodes; without "
+       "jitter vs the map's own spectral radius", "pipeline.sim.stability.mean_square_radius")
+def _mean_square() -> Outcome:
+    from pipeline.sim import stability as st
+
+    diffs = []
+    for g, low, high in ((1.1, 0.0, 0.9), (0.6, 0.2, 0.5), (1.5, 0.3, 0.3)):
+        # The scalar mode loop, n = 0: w = [e; p_{k−1}], e⁺ = (1 − g)e + δ(p_old + g e).
+        A0, A1 = np.array([[1.0 - g, 0.0], [-g, 0.0]]), np.array([[g, 1.0], [0.0, 0.0]])
+        ms = st.mean_square_radius((A0, A1, np.zeros((2, 2))), low, high)
+        x, w = np.polynomial.legendre.leggauss(6)
+        S = sum(wi / 2 * np.kron(A0 + d * A1, A0 + d * A1)
+                for d, wi in zip(low + (high - low) * (x + 1) / 2, w, strict=True))
+        diffs.append(abs(ms - np.sqrt(np.max(np.abs(np.linalg.eigvals(S))))))
+    return Outcome("scalar mode loops g = 1.1, 0.6, 1.5 with δ on [0, 0.9], [0.2, 0.5] and "
+                   "0.3 (no jitter)", max(diffs), 1e-10)
+
+
 @check("36", "ring() on synthetic series with known answers: oscillations of period 6 and 2 on "
        "a slow trend (their period and peak to peak), a small one under a slew a thousand "
        "times larger (rings), white noise and a smooth series (no ring), a stable mode's "
@@ -225,6 +271,8 @@ CHECKS = (
     _discrete_map,
     _flown_map,
     _margins,
+    _fractional_margins,
+    _mean_square,
     _ring,
     _amplification,
     _critical_step,
