@@ -14,7 +14,9 @@ drift of the host's speed between repeats does not enter them:
   coverage, filling the log's columns), from ``Mission.run``;
 - ``sampled_step_us``: the same mission's step on the sampled-data plant with one step of
   delay (eq. 29: RK4 on the compiled articulated-body algorithm), and its ratio to the
-  simulator's step (``sampled_ratio``, target ≤ 4);
+  simulator's step (``sampled_ratio``, target ≤ 4); ``sampled_jitter_step_us``: the same with
+  the command arriving within the step and jittered (eq. 41: a quarter to three quarters of a
+  step after the one step of delay), the hold split in two;
 - ``montecarlo``: the wall time of an 852-sample Monte Carlo of that 60 s mission on two
   workers (``specs/montecarlo/bench_sampled_delay.yaml``; 40 samples in quick mode), its
   records in a fresh folder (target ≤ 600 s);
@@ -107,15 +109,18 @@ def step_costs(spec: Spec, log: Path, repeats: int) -> dict:
     analysis_once(robot, log)  # warm-up: compiles the analysis kernels if the cache is cold
     sampled_spec = with_overrides(spec, {"mission.plant.model": "sampled",
                                          "mission.plant.delay_steps": 1}, name="bench_sampled")
-    floor, sim, ana, sampled = [], [], [], []
+    jitter_spec = with_overrides(sampled_spec, {"mission.plant.timing": {
+        "delay_fraction": 0.25, "jitter": 0.5, "seed": 1}}, name="bench_sampled_jitter")
+    floor, sim, ana, sampled, jittered = [], [], [], [], []
     for _ in range(repeats):
         floor.append(floor_once(robot, q, v))
         sim.append(sim_once(spec))
         sampled.append(sim_once(sampled_spec))
+        jittered.append(sim_once(jitter_spec))
         ana.append(analysis_once(robot, log))
     f = np.asarray(floor)
     return {"floor_us": _stats(floor), "sim_step_us": _stats(sim), "analysis_step_us": _stats(ana),
-            "sampled_step_us": _stats(sampled),
+            "sampled_step_us": _stats(sampled), "sampled_jitter_step_us": _stats(jittered),
             "sim_ratio": _stats(list(np.asarray(sim) / f)),
             "sampled_ratio": _stats(list(np.asarray(sampled) / np.asarray(sim))),
             "analysis_ratio": _stats(list(np.asarray(ana) / f))}
@@ -252,6 +257,7 @@ def run_bench(out_dir: Path, quick: bool = False) -> dict:
         "sim_ratio": costs["sim_ratio"]["median"],
         "sim_ratio_stats": costs["sim_ratio"],
         "sampled_step_us": costs["sampled_step_us"],
+        "sampled_jitter_step_us": costs["sampled_jitter_step_us"],
         "sampled_ratio": costs["sampled_ratio"]["median"],
         "sampled_ratio_stats": costs["sampled_ratio"],
         "montecarlo": montecarlo,
@@ -296,6 +302,7 @@ Pinocchio {m['pinocchio']}, Numba {m['numba']}.{' Quick mode (shorter runs).' if
 {row('floor: Pinocchio calls of one step', r['floor_us'])}
 {row('simulator: whole controller step', r['sim_step_us'])}
 {row('sampled-data plant, one step of delay: whole step', r['sampled_step_us'])}
+{row('sampled plant, 1.25–1.75 steps of delay (eq. 41)', r['sampled_jitter_step_us'])}
 {row('analysis: Γ rebuild, per-direction SVD, lag-1', r['analysis_step_us'])}
 
 Each repeat measures the floor, the simulator and the analysis back to back; a ratio is the
