@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import argparse
 import re
+import subprocess
 import sys
 import warnings
 from pathlib import Path
 
-from pipeline.errors import PipelineError
+from pipeline.errors import PipelineError, RunFailed
 
 
 def _cmd_validate(a: argparse.Namespace) -> int:
@@ -134,9 +135,10 @@ def _cmd_report(a: argparse.Namespace) -> int:
     return _report(Path(a.out), a.force)
 
 
-def _claims(claims: str, out: Path, force: bool = False):
+def _claims(claims: str, out: Path, force: bool = False, studies: str = "read"):
     """The claims stage: its exit code and, when it evaluated, its ClaimsOutcome (None when
-    the register was current)."""
+    the register was current). ``studies``: read the current studies (the decision) or fly
+    them at the register's N first (:mod:`pipeline.claims.evaluate`)."""
     from pipeline.atomic_files import atomic_write_text
     from pipeline.claims.record import (
         RECORD_NAME,
@@ -147,7 +149,7 @@ def _claims(claims: str, out: Path, force: bool = False):
         status_counts,
         summary_lines,
     )
-    from pipeline.claims.register import load_claims, register_sources
+    from pipeline.claims.register import load_claims, register_sources, study_sources
     from pipeline.paths import display_path
     from pipeline.progress import say, stage
     from pipeline.spec import resolve_spec_path
@@ -155,7 +157,7 @@ def _claims(claims: str, out: Path, force: bool = False):
 
     stamp, page = out / CLAIMS_KEY_FILE, out / "CLAIMS.md"
     cf = load_claims(resolve_spec_path(claims))  # a bad register is one line, before any stage
-    sources = register_sources(cf)
+    sources = {**register_sources(cf), **study_sources(cf, out), "studies": studies}
     outcome = None
     # Current claims are said so before the simulator, the analysis or the renderer is
     # imported: the second `make all` should take seconds.
@@ -169,7 +171,7 @@ def _claims(claims: str, out: Path, force: bool = False):
 
         # Runs, analyses, sweeps and checks are stages of their own, as they start.
         with stage("claims", f"({claims}: what is missing is made first)") as st:
-            outcome = run_claims(claims, out)
+            outcome = run_claims(claims, out, studies)
             page = render_claims(outcome, out)
             made = [outcome.record, page, page.with_suffix(".html")]
             atomic_write_text(stamp, claims_key(sources, [*outcome.files, *made]))
@@ -185,7 +187,7 @@ def _claims(claims: str, out: Path, force: bool = False):
 
 
 def _cmd_claims(a: argparse.Namespace) -> int:
-    return _claims(a.claims, Path(a.out), a.force)[0]
+    return _claims(a.claims, Path(a.out), a.force, a.studies)[0]
 
 
 def _import_later_stages() -> None:
@@ -203,7 +205,7 @@ def _import_later_stages() -> None:
         pass
 
 
-def _cmd_all(a: argparse.Namespace) -> int:
+def _cmd_all(a: argparse.Namespace, compiled: bool = False) -> int:
     """compile, claims, report in one process (`make all`): the libraries are imported once
     and the report reuses the claims' check of the equations against the code. A claim or a
     run that fails still leaves the reports rendered, then the exit code is the claims' (1);
@@ -211,7 +213,8 @@ def _cmd_all(a: argparse.Namespace) -> int:
     from pipeline.compile import compile_kernels
 
     out = Path(a.out)
-    compile_kernels(a.processes, when_idle=_import_later_stages)
+    if not compiled:
+        compile_kernels(a.processes, when_idle=_import_later_stages)
     try:
         code, outcome = _claims(a.claims, out)
     except PipelineError as exc:
@@ -229,6 +232,43 @@ def _cmd_all(a: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         report = exc.exit_code
     return code or report
+
+
+def _cmd_studies(a: argparse.Namespace) -> int:
+    """Fly every study the register names at its entry's N (`make studies`), one after another
+    on the cluster asked for, each one's kept records reused and a current one not flown
+    again; then the claims and the reports, as `make all`, which now read them."""
+    from pipeline.claims.register import load_claims, montecarlo_path, needed_montecarlos
+    from pipeline.compile import compile_kernels
+    from pipeline.montecarlo.studies import FOLDERS, study_result
+    from pipeline.progress import say, stage
+    from pipeline.spec import resolve_spec_path
+
+    cf = load_claims(resolve_spec_path(a.claims))
+    out, logs = Path(a.out), Path(cf.logs)
+    todo = [(kind, alias) for kind in FOLDERS for alias in needed_montecarlos(cf, kind)]
+    compile_kernels(a.processes)
+    for k, (kind, alias) in enumerate(todo, 1):
+        ref = getattr(cf, kind)[alias]
+        path = montecarlo_path(cf, ref)
+        st = study_result(kind, path, ref.samples, out)
+        if st.result is not None:
+            say(f"{kind} {st.name}: up to date ({st.ran} samples) -> {st.provenance['file']}")
+            continue
+        cmd = [sys.executable, "-m", "pipeline", kind, str(path), "--logs",
+               str(logs / FOLDERS[kind]), "--out", str(out / FOLDERS[kind]),
+               "--workers", str(a.workers)]
+        cmd += ["--samples", str(ref.samples)] if ref.samples else []
+        cmd += ["--scheduler", a.scheduler] if a.scheduler else []
+        cmd += ["--slurm"] if a.slurm else []
+        cmd += ["--worker-timeout", str(a.worker_timeout)] if a.worker_timeout else []
+        with stage(kind, f"{alias} ({k} of {len(todo)}: {st.full} samples of {path.name}; "
+                   "kept records reused)"):
+            rc = subprocess.call(cmd)
+        if rc:
+            raise RunFailed(f"studies: {kind} {path.name} failed (exit {rc}); run `make studies` "
+                            "again to finish it (its kept records are reused)")
+    return _cmd_all(a, compiled=True)
 
 
 def _cmd_sweep(a: argparse.Namespace) -> int:
@@ -297,6 +337,17 @@ class _StageFormatter(argparse.RawDescriptionHelpFormatter):
 def _formatter(prog: str) -> argparse.HelpFormatter:
     # Raw: the description and the examples keep their lines; wide: help texts on one line.
     return _StageFormatter(prog, max_help_position=32, width=100)
+
+
+def _sample_count(text: str) -> int:
+    """A count of samples: a whole number of at least 1 (argparse's one-line error, exit 2)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{n} samples: give 1 or more")
+    return n
 
 
 def _stage(sub, name: str, summary: str, example: str) -> argparse.ArgumentParser:
@@ -473,7 +524,27 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--force", action="store_true",
                    help="evaluate again even if the register, its specs and every artefact it "
                    "reads are as they were (default: off; e.g. --force)")
+    c.add_argument("--studies", choices=("read", "run"), default="read",
+                   help="read: the current results of the studies (Monte Carlos, power "
+                   "studies) at their files' N, the claims that need one deferred without it; "
+                   "run: fly them first at the N the register asks (default: read; e.g. "
+                   "--studies run, as make claims-ci)")
     c.set_defaults(func=_cmd_claims)
+
+    t = _stage(sub, "studies", "fly the studies the claims need (Monte Carlos, power studies) "
+               "at their files' full N, then the claims and reports, as `make studies` does",
+               "--claims claims --out generated_reports --workers 2")
+    t.add_argument("--claims", default="claims", metavar="FILE",
+                   help="claims file naming the studies (default: claims; e.g. --claims "
+                   "my_claims.yaml)")
+    t.add_argument("--out", default="generated_reports", metavar="DIR",
+                   help="report folder: DIR/montecarlo/<name>/, DIR/power/<name>/ and the "
+                   "reports (default: generated_reports; e.g. --out /tmp/reports)")
+    t.add_argument("--processes", type=int, default=2, metavar="N",
+                   help="processes compiling the kernels, as for `compile` "
+                   "(default: 2; e.g. --processes 1)")
+    _dask_options(t, lifetime=False)
+    t.set_defaults(func=_cmd_studies)
 
     s = _stage(sub, "sweep", "run a grid of overrides of one spec on Dask",
                "nominal --set mission.dt=0.01,0.03 --set mission.duration=20")
@@ -498,7 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
                "seed_dispersions --samples 40")
     m.add_argument("file", help="a Monte Carlo file: a path, or a name under specs/montecarlo/ "
                    "(e.g. seed_dispersions)")
-    m.add_argument("--samples", type=int, default=None, metavar="N",
+    m.add_argument("--samples", type=_sample_count, default=None, metavar="N",
                    help="run the first N samples (default: the file's samples, else the count "
                    "that shows its target with none failing, eq. 38b; e.g. --samples 40)")
     m.add_argument("--sample", type=int, default=None, metavar="I",
@@ -518,6 +589,9 @@ def build_parser() -> argparse.ArgumentParser:
                "noise", "detector_power")
     w.add_argument("file", help="a power file: a path, or a name under specs/montecarlo/ "
                    "(e.g. detector_power)")
+    w.add_argument("--samples", type=_sample_count, default=None, metavar="N",
+                   help="run the first N runs per mission and level (default: the file's "
+                   "samples; e.g. --samples 2)")
     _dask_options(w, lifetime=False)
     w.add_argument("--logs", default="logs/power", metavar="DIR",
                    help="where each sample's record is kept (default: logs/power; e.g. --logs "

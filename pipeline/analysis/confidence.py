@@ -39,6 +39,15 @@ def samples_needed(p: float, confidence: float) -> int:
     return n
 
 
+def confidence_reachable(p: float, n: int) -> float:
+    """The most confidence that ``n`` samples can show for a pass probability ``p``: with none
+    failing, p_L = (1 − C)^(1/N) reaches p at C = 1 − p^N (eq. 38d); 0 for no samples."""
+    _check("p", p, 0.0, 1.0)
+    if n < 0:
+        raise ValueError(f"n = {n!r}: a count of samples is 0 or more")
+    return float(-math.expm1(n * math.log(p)))
+
+
 def lower_bound(passes: int, n: int, confidence: float) -> float:
     """The one-sided Clopper–Pearson lower bound on the pass probability from ``passes`` of
     ``n`` samples at ``confidence`` (eq. 38); 0 when none passed."""

@@ -2,9 +2,16 @@
 write ``claims.json`` (the reports render it as CLAIMS.md).
 
 Statuses: PASS (a ``hold`` claim holds), FAIL (a ``hold`` claim does not: exit 1), OPEN (an
-``open`` claim does not hold yet: listed with its measured value and reason, no failure) and
+``open`` claim does not hold yet: listed with its measured value and reason, no failure),
 NOW HOLDS (an ``open`` claim that holds: like a strict xfail, exit 1 until it is promoted to
-``expect: hold``). The comparator is a table of operators; nothing is evaluated as code.
+``expect: hold``) and DEFERRED (a claim that reads a study, a Monte Carlo or a power study,
+of which no current result of its file's full N exists: neither PASS nor FAIL, no failure;
+it names the N that ran and the most confidence that N can show, docs/montecarlo.md). The
+comparator is a table of operators; nothing is evaluated as code.
+
+Studies (``studies``): ``read`` (the decision, `make all`) flies none and reads the current
+result of each at its file's N where one exists; ``run`` (`make studies`, `make claims-ci`)
+flies each at the N its register entry asks (its kept records reused), then reads it.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from pipeline.claims.register import (
     split_metric,
 )
 from pipeline.errors import SpecError
+from pipeline.montecarlo.studies import FOLDERS, StudyResult, study_result
 from pipeline.paths import display_path
 from pipeline.provenance.keys import source_version
 from pipeline.spec import load_spec, resolve_spec_path
@@ -78,8 +86,9 @@ def dig(obj: Any, path: str, what: str) -> Any:
 class Context:
     """Resolves metrics, running and analysing what the claims need, once."""
 
-    def __init__(self, cf: ClaimsFile, out_dir: Path):
+    def __init__(self, cf: ClaimsFile, out_dir: Path, studies: str = "read"):
         self.cf, self.out = cf, Path(out_dir)
+        self.studies = studies
         self.logs = Path(cf.logs)  # relative to the working directory, like --out
         self.here = Path(cf.source).resolve().parent
         self.store = ArtefactStore(self.logs, self.out)
@@ -92,7 +101,7 @@ class Context:
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> sweep.background.SweepJob, started by start_sweeps
         self._mc_jobs: dict = {}  # alias -> sweep.background.BackgroundJob (Monte Carlo, power)
-        self._montecarlos: dict[str, tuple[dict, dict]] = {}
+        self._studies: dict[str, StudyResult] = {}
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key
         # (pipeline.store.validity.current_claims).
@@ -175,36 +184,47 @@ class Context:
                                             self.out / "sweeps", ref.workers)
 
     def start_montecarlos(self) -> None:
-        """Start every Monte Carlo the claims use in the background (each its own process and
-        Dask cluster; the samples whose records are kept are not run again)."""
+        """Start every Monte Carlo and power study the claims use in the background (each its
+        own process and Dask cluster; the samples whose records are kept are not run again),
+        when this evaluation flies the studies (``studies == "run"``)."""
         from pipeline.montecarlo.background import start_montecarlo
 
-        for alias in needed_montecarlos(self.cf):
-            ref = self.cf.montecarlo[alias]
-            self._mc_jobs[alias] = start_montecarlo(
-                montecarlo_path(self.cf, ref), ref.samples, self.logs / "montecarlo",
-                self.out / "montecarlo", ref.workers)
-        for alias in needed_montecarlos(self.cf, "power"):
-            ref = self.cf.power[alias]
-            self._mc_jobs[f"power:{alias}"] = start_montecarlo(
-                montecarlo_path(self.cf, ref), None, self.logs / "power", self.out / "power",
-                ref.workers, stage="power")
+        if self.studies != "run":
+            return
+        for kind in ("montecarlo", "power"):
+            for alias in needed_montecarlos(self.cf, kind):
+                ref = getattr(self.cf, kind)[alias]
+                self._mc_jobs[f"{kind}:{alias}"] = start_montecarlo(
+                    montecarlo_path(self.cf, ref), ref.samples, self.logs / FOLDERS[kind],
+                    self.out / FOLDERS[kind], ref.workers, stage=kind)
 
     def stop_sweeps(self) -> None:
         for job in [*self._jobs.values(), *self._mc_jobs.values()]:
             job.stop()
 
-    def montecarlo(self, alias: str, kind: str = "montecarlo") -> tuple[dict, dict]:
-        """The verdict of a Monte Carlo (or the result of a power study) of the claims."""
-        job = alias if kind == "montecarlo" else f"{kind}:{alias}"
-        if job not in self._montecarlos:
-            from pipeline.montecarlo.background import finish_montecarlo, finish_power
+    def study(self, alias: str, kind: str = "montecarlo") -> StudyResult:
+        """A study of the claims (a Monte Carlo, or a power study): its current result of
+        the N its entry asks, waited for when this evaluation flies it, or none (deferred)."""
+        job = f"{kind}:{alias}"
+        if job not in self._studies:
+            from pipeline.montecarlo.background import wait_study
 
-            finish = finish_montecarlo if kind == "montecarlo" else finish_power
-            verdict, prov, files = finish(self._mc_jobs[job])
-            self._montecarlos[job] = (verdict, prov)
-            self.files += files
-        return self._montecarlos[job]
+            ref = getattr(self.cf, kind)[alias]
+            if job in self._mc_jobs:
+                wait_study(self._mc_jobs[job])
+            st = study_result(kind, montecarlo_path(self.cf, ref), ref.samples, self.out)
+            self._studies[job] = st
+            self.files += st.files
+        return self._studies[job]
+
+    def deferral(self, metric: str) -> str | None:
+        """Why a claim reading ``metric`` is deferred (a study without a current result of its
+        file's N), or None."""
+        source, path = split_metric(metric)
+        if source not in FOLDERS:
+            return None
+        st = self.study(path.partition(".")[0], source)
+        return st.deferral() if st.deferred else None
 
     def sweep(self, alias: str) -> tuple[dict, dict]:
         if alias not in self._sweeps:
@@ -228,10 +248,12 @@ class Context:
             alias, _, key = path.partition(".")
             bracket, prov = self.sweep(alias)
             return dig(bracket, key, f"the stability bracket of sweep {alias}"), prov
-        if source in ("montecarlo", "power"):
+        if source in FOLDERS:
             alias, _, key = path.partition(".")
-            verdict, prov = self.montecarlo(alias, source)
-            return dig(verdict, key, f"the {source} result {alias}"), prov
+            st = self.study(alias, source)
+            if st.result is None:  # deferred: nothing measured
+                return None, st.provenance
+            return dig(st.result, key, f"the {source} result {alias}"), st.provenance
         if source == "cross_check":
             cc = self.cross_check()
             prov = {"source": source, "version": cc["source_version"],
@@ -287,9 +309,11 @@ def compare_values(op: str, value: Any, threshold: Any, rel_tol: float | None = 
 def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
     out = []
     for claim in cf.claims:
-        evals, prov = [], []
+        evals, prov, deferred = [], [], []
         for k, chk in enumerate(claim.checks, 1):
             try:
+                deferred += filter(None, (ctx.deferral(m) for m in
+                                          (chk.metric, chk.threshold_metric) if m))
                 value, p = ctx.value(chk.metric)
                 prov.append(p)
                 thr = chk.threshold
@@ -302,7 +326,7 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
                                 f"{chk.metric}: {exc}") from None
             evals.append(CheckEval(chk, value, thr, ok))
         unique = [dict(t) for t in dict.fromkeys(tuple(sorted(p.items())) for p in prov)]
-        out.append(ClaimEval(claim, evals, unique))
+        out.append(ClaimEval(claim, evals, unique, " ".join(dict.fromkeys(deferred))))
     return out
 
 
@@ -333,11 +357,12 @@ class ClaimsOutcome:
         return sum(r.status == status for r in self.results)
 
 
-def run_claims(claims: Path | str, out: Path) -> ClaimsOutcome:
+def run_claims(claims: Path | str, out: Path, studies: str = "read") -> ClaimsOutcome:
     """Load the register (a path, or a name on the spec search path), run and analyse what
-    it needs, evaluate every claim and write ``claims.json``."""
+    it needs (the studies too when ``studies`` is ``run``), evaluate every claim and write
+    ``claims.json``."""
     cf = load_claims(resolve_spec_path(claims))
-    ctx = Context(cf, out)
+    ctx = Context(cf, out, studies)
     try:
         ctx.start_sweeps()
         ctx.start_montecarlos()

@@ -17,7 +17,7 @@ from pipeline.claims.register import CLAIMS_SCHEMA, OPERATORS, Claim, ClaimCheck
 from pipeline.errors import LogError
 from pipeline.paths import display_path
 
-STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS")
+STATUSES = ("PASS", "FAIL", "OPEN", "NOW HOLDS", "DEFERRED")
 RECORD_NAME = CLAIMS_FILE
 
 
@@ -38,6 +38,9 @@ class ClaimEval:
     claim: Claim
     checks: list[CheckEval]
     provenance: list[dict] = field(default_factory=list)
+    # Why it cannot be judged yet: a study it reads has no current result of its file's N
+    # (pipeline.montecarlo.studies); "" when it can.
+    deferred: str = ""
 
     @property
     def holds(self) -> bool:
@@ -45,6 +48,8 @@ class ClaimEval:
 
     @property
     def status(self) -> str:
+        if self.deferred:
+            return "DEFERRED"
         if self.claim.expect == "hold":
             return "PASS" if self.holds else "FAIL"
         return "NOW HOLDS" if self.holds else "OPEN"
@@ -65,7 +70,7 @@ def write_claims_json(results: list[ClaimEval], cf: ClaimsFile, out_dir: Path,
             "source_version": version,
             "claims": [{"id": r.claim.id, "statement": r.claim.statement,
                         "kind": r.claim.kind, "expect": r.claim.expect, "status": r.status,
-                        "reason": r.claim.reason,
+                        "reason": r.claim.reason, "deferred": r.deferred,
                         "checks": [{"metric": c.check.metric, "op": c.check.op,
                                     "rel_tol": c.check.rel_tol,
                                     "value": _jsonable(c.value),
@@ -138,8 +143,10 @@ def exit_code(data: dict) -> int:
 
 
 def summary_lines(data: dict) -> list[str]:
-    """One line per claim: its status and each check's value against its threshold."""
-    return [f"{c['id']:>4} {c['status']:<9} " + "; ".join(
+    """One line per claim: its status and each check's value against its threshold (a
+    deferred claim: why, and what its study's N can show)."""
+    return [f"{c['id']:>4} {c['status']:<9} " + c["deferred"] if c.get("deferred") else
+            f"{c['id']:>4} {c['status']:<9} " + "; ".join(
         f"{k['metric']} = {_short(k['value'])} ({OPERATORS[k['op']][1]} {_short(k['threshold'])})"
         for k in c["checks"]) for c in data["claims"]]
 

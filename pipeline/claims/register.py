@@ -60,7 +60,8 @@ OPERATORS: dict[str, tuple[Callable[[Any, Any], bool], str]] = {
     "close": (lambda a, b: True, "≈"),  # with rel_tol: see compare_values in claims.py
 }
 # /2: each claim carries its kind (physics, note, identity, software), which the reports read.
-CLAIMS_SCHEMA = "breve-claims/2"  # the version of the claims.json the register writes
+# /3: a claim may be DEFERRED, with the reason in "deferred".
+CLAIMS_SCHEMA = "breve-claims/3"  # the version of the claims.json the register writes
 NUMERIC_OPS = {k for k in OPERATORS if k not in ("eq", "ne")}
 FIXED_SOURCES = ("cross_check", "baselines", "sweep", "montecarlo", "power", "note")
 # v_breve is its task part; null_space a redundant arm's null-space velocities (eq. 37).
@@ -387,6 +388,21 @@ def register_sources(cf: ClaimsFile) -> dict[str, str]:
 
         out[f"power {name}"] = power_file_key(montecarlo_path(cf, ref))
     return out
+
+
+def study_sources(cf: ClaimsFile, out: Path) -> dict[str, str]:
+    """The studies' results under report folder ``out`` as they stand, by hash ("none"
+    where there is none): a result made since the last evaluation (`make studies`) makes
+    the claims evaluate again, for their key (:func:`pipeline.store.validity.claims_key`)."""
+    from pipeline.montecarlo.studies import result_files
+    from pipeline.provenance.keys import file_digest
+
+    out_ = {}
+    for kind in ("montecarlo", "power"):
+        for name, ref in getattr(cf, kind).items():
+            result = result_files(kind, Path(ref.file).stem, out)[1]
+            out_[f"{kind} {name} result"] = file_digest(result) if result.is_file() else "none"
+    return out_
 
 
 def montecarlo_path(cf: ClaimsFile, ref: MonteCarloRef) -> Path:

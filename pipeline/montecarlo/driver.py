@@ -7,6 +7,7 @@ import argparse
 import signal
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from pipeline.atomic_files import atomic_write_text
@@ -141,9 +142,12 @@ def montecarlo_command(args: argparse.Namespace) -> int:
             signal.signal(signum, handler)
     wall = time.perf_counter() - t0
     df = make_table(records)
-    v = judge(df, mc.name, mc.config, mc.base,
-              {k: describe(d) for k, d in sorted(mc.config.dispersions.items())},
-              requirement_of(mc), wall)
+    from pipeline.montecarlo.studies import study_key
+
+    v = replace(judge(df, mc.name, mc.config, mc.base,
+                      {k: describe(d) for k, d in sorted(mc.config.dispersions.items())},
+                      requirement_of(mc), wall),
+                key=study_key("montecarlo", mc.path, len(mc.samples)))
     out.mkdir(parents=True, exist_ok=True)
     meta = {"pipeline.montecarlo": mc.name, "pipeline.mission": mc.base.name,
             "pipeline.base_spec_hash": mc.base.spec_hash, "pipeline.sample_version":

@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -85,17 +85,25 @@ class PowerPlan:
     samples: list[PowerSample]
 
 
-def plan_power(ref: str | Path) -> PowerPlan:
-    """Read and validate a power file and build every sample's spec (SpecError naming the
-    field); nothing runs."""
-    path = resolve_montecarlo(ref)
+def read_power_file(path: Path) -> PowerFile:
+    """A power file, validated (SpecError naming the field)."""
     try:
-        config = PowerFile.model_validate(read_yaml(path))
+        return PowerFile.model_validate(read_yaml(path))
     except ValidationError as exc:
         err = exc.errors()[0]
         where = ".".join(str(x) for x in err["loc"]) or "file"
         msg = "unknown key" if err["type"] == "extra_forbidden" else err["msg"]
         raise SpecError(f"{path}: field {where}: {msg}") from None
+
+
+def plan_power(ref: str | Path, samples: int | None = None) -> PowerPlan:
+    """Read and validate a power file and build every sample's spec (SpecError naming the
+    field); nothing runs. ``samples`` overrides the file's runs per mission and level (the
+    first runs of each: a run's seed depends on its level and index alone)."""
+    path = resolve_montecarlo(ref)
+    config = read_power_file(path)
+    if samples is not None:
+        config = config.model_copy(update={"samples": samples})
     if config.noise not in NOISE_FIELDS:
         raise SpecError(f"{path}: field noise: {config.noise!r} is not a sensor field (one of "
                         f"{', '.join(NOISE_FIELDS)})")
@@ -207,6 +215,7 @@ class PowerResult:
     not_judged: int
     statement: str
     wall_s: float
+    key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
 
 
 UNITS = {"gyro_arw": "rad/√s", "gyro_bias": "rad/s", "gyro_bias_walk": "rad/s/√s",
@@ -294,7 +303,7 @@ def power_command(args: argparse.Namespace) -> int:
     from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
     from pipeline.sweep.driver import check_writable, execute_tasks
 
-    plan = plan_power(args.file)
+    plan = plan_power(args.file, args.samples)
     root = Path(args.logs).resolve() / plan.name
     out = Path(args.out).resolve() / plan.name
     for folder in (root, out):
@@ -326,7 +335,10 @@ def power_command(args: argparse.Namespace) -> int:
                                 session.jobs, kind="power", unit="sample")
     df = pd.DataFrame(records)
     df["level"] = [plan.config.levels[j] for j in df["level_index"]]
-    result = rates(df, plan, time.perf_counter() - t0)
+    from pipeline.montecarlo.studies import study_key
+
+    result = replace(rates(df, plan, time.perf_counter() - t0),
+                     key=study_key("power", plan.path, plan.config.samples))
     path = write_power(df.drop(columns=["received"], errors="ignore"), result, out)
     print(power_text(result, path))
     errored = int((df["status"] == "error").sum())

@@ -89,6 +89,7 @@ class MonteCarloVerdict:
     worst: list[WorstSample]
     simulated: int  # samples run by this invocation (the others: kept records)
     wall_s: float
+    key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
 
 
 def make_table(records: list[dict]) -> pd.DataFrame:

@@ -246,6 +246,7 @@ def montecarlo_figure_jobs(out: Path) -> list[tuple[fg.Figure, Callable]]:
 def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:
     """One page per Monte Carlo (``montecarlo/<name>/montecarlo.{md,html}``), and the index's
     entries (its verdict and its page)."""
+    from pipeline.montecarlo.studies import is_current
     from pipeline.montecarlo.verdict import read_verdict
 
     drawn = {f.file for f in figs}
@@ -260,7 +261,8 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
         folder = table.parent
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
                     render("montecarlo.html.j2", folder / "montecarlo.html", **ctx)]
-        entries.append({"v": v, "page": folder.relative_to(out).as_posix() + "/montecarlo.html"})
+        entries.append({"v": v, "page": folder.relative_to(out).as_posix() + "/montecarlo.html",
+                        "current": is_current("montecarlo", v.name, v.key, v.samples)})
     return written, entries
 
 
@@ -268,6 +270,7 @@ def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dic
     """One page per detector-power study (``power/<name>/power.{md,html}``) and the index's
     entries."""
     from pipeline.montecarlo.power import read_power
+    from pipeline.montecarlo.studies import is_current
 
     drawn = {f.file for f in figs}
     written, entries = [], []
@@ -281,7 +284,7 @@ def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dic
         written += [render("power.md.j2", result.parent / "power.md", **ctx),
                     render("power.html.j2", result.parent / "power.html", **ctx)]
         entries.append({"r": r, "page": result.parent.relative_to(out).as_posix()
-                        + "/power.html"})
+                        + "/power.html", "current": is_current("power", r.name, r.key, r.samples)})
     return written, entries
 
 

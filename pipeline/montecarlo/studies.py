@@ -1,0 +1,165 @@
+"""The claims' studies: the Monte Carlos and the detector-power studies a register names, the N
+each needs, and whether a current result of that N exists (docs/montecarlo.md, "In the
+claims: the decision and the studies").
+
+`make all` (the decision) does not fly the studies: it reads a current result where one exists
+and defers the claims that need one otherwise. `make studies` flies them at their files' full
+N; `make claims-ci` flies them at the small N its register declares, which exercises the
+machinery but cannot show the target, so its claims are deferred too. A result is current when
+its ``key`` (:func:`study_key`: the file, its mission specs and robot files, the N asked and
+the samples' code) is this code's for that file; a result of fewer samples than the file's N
+defers the claims that read it, naming the N that ran and the most confidence that N can show
+(eq. 38d).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+from pipeline.analysis.confidence import confidence_reachable
+from pipeline.errors import LogError
+from pipeline.paths import display_path
+
+Kind = Literal["montecarlo", "power"]
+# Where a study's records are kept (under the register's logs) and its result is written
+# (under the report folder), by kind.
+FOLDERS: dict[str, str] = {"montecarlo": "montecarlo", "power": "power"}
+
+
+def full_samples(kind: Kind, path: Path) -> int:
+    """The N the study's file declares: a Monte Carlo's ``samples``, else the success-run
+    count of its target (eq. 38b); a power study's runs per mission and level."""
+    if kind == "montecarlo":
+        from pipeline.analysis.confidence import samples_needed
+        from pipeline.montecarlo.plan import read_montecarlo
+
+        c = read_montecarlo(path)
+        return c.samples or samples_needed(c.target.p, c.target.confidence)
+    from pipeline.montecarlo.power import read_power_file
+
+    return read_power_file(path).samples
+
+
+def study_key(kind: Kind, path: Path, samples: int) -> str:
+    """What a study's result is made from: its file's content, its missions' specs and robot
+    files, the N flown and the samples' code (:func:`pipeline.provenance.keys.sample_version`).
+    A result carries it; a result whose key is not this one is not current."""
+    from pipeline.provenance.keys import sample_version
+
+    if kind == "montecarlo":
+        from pipeline.montecarlo.plan import montecarlo_key
+
+        made_of = montecarlo_key(path, samples)
+    else:
+        from pipeline.montecarlo.power import power_file_key
+
+        made_of = f"{power_file_key(path)}, samples {samples}"
+    return f"{made_of}, code {sample_version()}"
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """A study the claims read: its result (None: no current one), the N that ran and the N
+    its file declares, and the files the claims' key holds."""
+
+    kind: Kind
+    name: str  # the file's stem: the result's folder
+    file: Path
+    full: int
+    ran: int
+    result: dict | None
+    provenance: dict
+    files: tuple[Path, ...]
+    target_p: float | None  # a Monte Carlo's target pass probability
+
+    @property
+    def deferred(self) -> bool:
+        return self.result is None or self.ran < self.full
+
+    def deferral(self) -> str:
+        """Why a claim that reads this study is deferred, in one sentence."""
+        what = "samples" if self.kind == "montecarlo" else "runs per mission and level"
+        ran = (f"{self.ran} of the {self.full} {what} ran" if self.result is not None else
+               f"no current result (the file's {self.full} {what} have not flown with this "
+               "code)")
+        reach = ""
+        if self.kind == "montecarlo" and self.target_p is not None:
+            reach = (f"; {self.ran} samples can show p {self.target_p:g} at no more than "
+                     f"{100 * confidence_reachable(self.target_p, self.ran):.3g} % confidence "
+                     f"(eq. 38d), {self.full} at "
+                     f"{100 * confidence_reachable(self.target_p, self.full):.3g} %")
+        return (f"deferred to `make studies`: {self.kind} {self.name}: {ran}{reach}")
+
+
+def result_files(kind: Kind, name: str, out: Path) -> tuple[Path, Path]:
+    """The study's table and its result (the result written last) under report folder
+    ``out``."""
+    from pipeline.montecarlo import power
+    from pipeline.montecarlo.verdict import TABLE_NAME, VERDICT_NAME
+
+    folder = Path(out) / FOLDERS[kind] / name
+    if kind == "montecarlo":
+        return folder / TABLE_NAME, folder / VERDICT_NAME
+    return folder / power.TABLE_NAME, folder / power.RESULT_NAME
+
+
+def read_result(kind: Kind, path: Path) -> tuple[dict, str, int]:
+    """A study's result as a mapping, its key and the N it flew (LogError if it is damaged)."""
+    if kind == "montecarlo":
+        from pipeline.montecarlo.verdict import read_verdict
+
+        v = read_verdict(path)
+        return asdict(v), v.key, v.samples
+    from pipeline.montecarlo.power import read_power
+
+    r = read_power(path)
+    return asdict(r), r.key, r.samples
+
+
+def study_result(kind: Kind, file: Path, samples: int | None, out: Path) -> StudyResult:
+    """The current result of the study ``file`` flown at ``samples`` (None: the file's N)
+    under report folder ``out``, or a result of None when there is none (absent, made from
+    other inputs or code, or damaged: a damaged one is said on stderr, never read)."""
+    import sys
+
+    full = full_samples(kind, file)
+    asked = samples or full
+    name = Path(file).stem
+    table, result_path = result_files(kind, name, out)
+    target = None
+    if kind == "montecarlo":
+        from pipeline.montecarlo.plan import read_montecarlo
+
+        target = read_montecarlo(file).target.p
+    prov = {"source": kind, "version": "—", "file": display_path(result_path)}
+    none = StudyResult(kind, name, Path(file), full, 0, None, prov, (), target)
+    if not result_path.is_file() or not table.is_file():
+        return none
+    try:
+        data, key, ran = read_result(kind, result_path)
+    except LogError as exc:
+        print(f"claims: {exc}: not read; `make studies` makes it again", file=sys.stderr)
+        return none
+    if key != study_key(kind, file, asked) or ran != asked:
+        return none
+    from pipeline.provenance.keys import sample_version
+
+    prov = {**prov, "version": f"samples {sample_version()}"}
+    return StudyResult(kind, name, Path(file), full, ran, data, prov, (table, result_path),
+                       target)
+
+
+def is_current(kind: Kind, name: str, key: str, samples: int) -> bool:
+    """Whether a result found by name (a report folder's ``<kind>/<name>/``) was made from the
+    shipped file of that name and this code (False where no such file is shipped: its inputs
+    cannot be checked from here)."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.plan import resolve_montecarlo
+
+    try:
+        path = resolve_montecarlo(name)
+    except SpecError:
+        return False
+    return bool(key) and key == study_key(kind, path, samples)
