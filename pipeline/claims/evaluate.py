@@ -326,7 +326,9 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
                                 f"{chk.metric}: {exc}") from None
             evals.append(CheckEval(chk, value, thr, ok))
         unique = [dict(t) for t in dict.fromkeys(tuple(sorted(p.items())) for p in prov)]
-        out.append(ClaimEval(claim, evals, unique, " ".join(dict.fromkeys(deferred))))
+        why = "; ".join(dict.fromkeys(deferred))
+        out.append(ClaimEval(claim, evals, unique,
+                             f"deferred to `make studies`: {why}" if why else ""))
     return out
 
 

@@ -79,7 +79,7 @@ class StudyResult:
         return self.result is None or self.ran < self.full
 
     def deferral(self) -> str:
-        """Why a claim that reads this study is deferred, in one sentence."""
+        """Why a claim that reads this study is deferred: what ran and what it can show."""
         what = "samples" if self.kind == "montecarlo" else "runs per mission and level"
         ran = (f"{self.ran} of the {self.full} {what} ran" if self.result is not None else
                f"no current result (the file's {self.full} {what} have not flown with this "
@@ -90,7 +90,7 @@ class StudyResult:
                      f"{100 * confidence_reachable(self.target_p, self.ran):.3g} % confidence "
                      f"(eq. 38d), {self.full} at "
                      f"{100 * confidence_reachable(self.target_p, self.full):.3g} %")
-        return (f"deferred to `make studies`: {self.kind} {self.name}: {ran}{reach}")
+        return f"{self.kind} {self.name}: {ran}{reach}"
 
 
 def result_files(kind: Kind, name: str, out: Path) -> tuple[Path, Path]:
