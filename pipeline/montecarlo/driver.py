@@ -13,7 +13,7 @@ from pathlib import Path
 from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import RunFailed
 from pipeline.montecarlo.dispersions import Dispersion
-from pipeline.montecarlo.plan import MonteCarlo, plan_montecarlo
+from pipeline.montecarlo.plan import MonteCarlo, plan_montecarlo, result_key
 from pipeline.montecarlo.task import cached_record, damaged, errored_record, sample_task
 from pipeline.montecarlo.verdict import (
     TABLE_NAME,
@@ -142,12 +142,10 @@ def montecarlo_command(args: argparse.Namespace) -> int:
             signal.signal(signum, handler)
     wall = time.perf_counter() - t0
     df = make_table(records)
-    from pipeline.montecarlo.studies import study_key
-
     v = replace(judge(df, mc.name, mc.config, mc.base,
                       {k: describe(d) for k, d in sorted(mc.config.dispersions.items())},
                       requirement_of(mc), wall),
-                key=study_key("montecarlo", mc.path, len(mc.samples)))
+                key=result_key(mc.path, len(mc.samples)))
     out.mkdir(parents=True, exist_ok=True)
     meta = {"pipeline.montecarlo": mc.name, "pipeline.mission": mc.base.name,
             "pipeline.base_spec_hash": mc.base.spec_hash, "pipeline.sample_version":

@@ -235,6 +235,14 @@ def montecarlo_key(ref: str | Path, samples: int | None = None) -> str:
             f"{file_digest(base.robot_path)}, samples {samples}")
 
 
+def result_key(ref: str | Path, samples: int) -> str:
+    """The key a Monte Carlo's verdict carries (``verdict.json``'s ``key``): what it is made
+    from (:func:`montecarlo_key`, at the N flown) and the samples' code."""
+    from pipeline.provenance.keys import sample_version
+
+    return f"{montecarlo_key(ref, samples)}, code {sample_version()}"
+
+
 def plan_montecarlo(ref: str | Path, samples: int | None = None) -> MonteCarlo:
     """Read and validate a Monte Carlo file and draw every sample (SpecError on bad input);
     nothing runs, nothing is written. ``samples`` overrides the file's count."""

@@ -146,6 +146,14 @@ def power_file_key(ref: str | Path) -> str:
     return f"file {file_digest(plan_path)}, specs {specs.hexdigest()}, robots {robots}"
 
 
+def result_key(ref: str | Path, samples: int) -> str:
+    """The key a power result carries (``power.json``'s ``key``): what it is made from
+    (:func:`power_file_key`), the runs per mission and level flown and the samples' code."""
+    from pipeline.provenance.keys import sample_version
+
+    return f"{power_file_key(ref)}, samples {samples}, code {sample_version()}"
+
+
 def power_key(spec: Spec) -> dict:
     from pipeline.provenance.keys import file_digest, sample_version
 
@@ -335,10 +343,8 @@ def power_command(args: argparse.Namespace) -> int:
                                 session.jobs, kind="power", unit="sample")
     df = pd.DataFrame(records)
     df["level"] = [plan.config.levels[j] for j in df["level_index"]]
-    from pipeline.montecarlo.studies import study_key
-
     result = replace(rates(df, plan, time.perf_counter() - t0),
-                     key=study_key("power", plan.path, plan.config.samples))
+                     key=result_key(plan.path, plan.config.samples))
     path = write_power(df.drop(columns=["received"], errors="ignore"), result, out)
     print(power_text(result, path))
     errored = int((df["status"] == "error").sum())

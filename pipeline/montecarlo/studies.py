@@ -46,17 +46,11 @@ def study_key(kind: Kind, path: Path, samples: int) -> str:
     """What a study's result is made from: its file's content, its missions' specs and robot
     files, the N flown and the samples' code (:func:`pipeline.provenance.keys.sample_version`).
     A result carries it; a result whose key is not this one is not current."""
-    from pipeline.provenance.keys import sample_version
-
     if kind == "montecarlo":
-        from pipeline.montecarlo.plan import montecarlo_key
-
-        made_of = montecarlo_key(path, samples)
+        from pipeline.montecarlo.plan import result_key
     else:
-        from pipeline.montecarlo.power import power_file_key
-
-        made_of = f"{power_file_key(path)}, samples {samples}"
-    return f"{made_of}, code {sample_version()}"
+        from pipeline.montecarlo.power import result_key
+    return result_key(path, samples)
 
 
 @dataclass(frozen=True)
