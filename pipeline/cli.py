@@ -24,15 +24,18 @@ def _cmd_validate(a: argparse.Namespace) -> int:
 
 def _cmd_run(a: argparse.Namespace) -> int:
     from pipeline.paths import display_path
-    from pipeline.sim.robot_file import load_spec_robot
     from pipeline.spec import load_spec
-    from pipeline.store.door import ArtefactStore
 
     # Every spec and its robot file checked before anything runs or prints: bad input is
-    # one line (exit 2), not a stage that started and failed.
+    # one line (exit 2), not a stage that started and failed; a spec's error before the
+    # simulator, the robot parsers and the store are imported (a second and a half).
     specs = [load_spec(s) for s in a.spec]
+    from pipeline.sim.robot_file import load_spec_robot
+
     for spec in specs:
         load_spec_robot(spec)
+    from pipeline.store.door import ArtefactStore
+
     store = ArtefactStore(a.out)
     for spec in specs:
         # A stored run that failed fails again, unrun: the simulation is deterministic.

@@ -87,6 +87,7 @@ def test_an_unknown_key_in_analysis_json_is_a_one_line_error(tmp_path):
     assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 def test_open_claims_are_listed_and_a_holding_one_asks_for_promotion(tmp_path):
     path = claims_file(tmp_path, [
         claim("O1", "nominal:dominant.lag1", "gt", 0.9, expect="open", reason="period-2 here"),
@@ -106,6 +107,7 @@ def test_open_claims_are_listed_and_a_holding_one_asks_for_promotion(tmp_path):
     assert data["claims"][0]["status"] == "NOW HOLDS"
 
 
+@pytest.mark.slow
 def test_a_current_register_is_reused_with_the_same_lines_and_exit_code(tmp_path):
     path = claims_file(tmp_path, [claim("R1", "nominal:dominant.lag1", "lt", -0.5),
                                   claim("R2", "nominal:dominant.lag1", "lt", -2.0)])
@@ -152,6 +154,7 @@ def test_a_changed_artefact_has_the_claims_evaluated_again(tmp_path, victim):
     assert "up to date" in run_cli("claims", "--claims", path, "--out", out).stderr
 
 
+@pytest.mark.slow
 def test_a_hand_edited_analysis_is_not_believed_by_the_claims(tmp_path):
     """An analysis.json whose number is edited (still whole, well-typed JSON) is made again
     from its log: the claim reads the analysis' value, never the edit (issue 36, item 2)."""

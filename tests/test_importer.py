@@ -789,6 +789,7 @@ def test_conventions_list_the_alternatives_a_check_can_tell_apart():
 
 # -- claims and reports by name ---------------------------------------------------------------
 
+@pytest.mark.slow
 def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     cols, _ = nominal
     src = _written(tmp_path, cols["q"], cols["v"], cols["t"])

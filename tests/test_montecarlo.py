@@ -196,6 +196,7 @@ def test_bad_files_are_refused_in_one_line(tmp_path, text, field):
     assert not (tmp_path / "o").exists() and not (tmp_path / "l").exists()
 
 
+@pytest.mark.slow
 def test_montecarlo_end_to_end(tmp_path):
     """Eight samples on the embedded Dask cluster: the bus damping from 1 to 5 N·m·s/rad puts
     the bus yaw's gain margin below 6 dB above 2.2 with one step of delay (4.5 without). The

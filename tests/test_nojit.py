@@ -37,6 +37,7 @@ def _cli(*args: str, jit: bool) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600, env=env)
 
 
+@pytest.mark.slow
 def test_python_mode_logs_the_compiled_run_bitwise_and_passes_analysis(tmp_path: Path):
     """Every logged column of the Python-mode run equals the compiled run's to the bit
     (max |diff| = 0, NaN counting as a difference), and the Python-mode log passes

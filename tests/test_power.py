@@ -43,6 +43,7 @@ def test_bad_power_files_are_refused(tmp_path, text, field):
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_power_study_end_to_end(tmp_path):
     """No noise: the ringing mission is seen by both detectors and the quiet one by neither.
     At 0.3 rad/√s (σ = 1.7 rad/s a sample at dt 0.03 s, ten times the ripple) both miss it.

@@ -204,6 +204,7 @@ def test_the_flown_map_of_a_redundant_arm_is_the_simulators_step(plant):
     assert abs(lin.Phi_fd[row, 9] / lin.Phi_theory[row, 9] - 1) < 1e-4
 
 
+@pytest.mark.slow
 def test_a_sweep_of_the_null_space_damping(tmp_path):
     """The sweep at n = 7 (embedded Dask): the null-space damping swept across forward
     Euler's bound at dt 0.005 s; each point's analysis sees its own fastest mode and map."""

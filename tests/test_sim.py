@@ -371,6 +371,7 @@ sys.exit(main(["run", "short_nominal", "--force", "--out", sys.argv[1]]))
 """
 
 
+@pytest.mark.slow
 def test_killed_run_leaves_no_complete_log_and_rerun_succeeds(tmp_path):
     out = tmp_path / "logs"
     log = out / "short_nominal" / "run.parquet"
