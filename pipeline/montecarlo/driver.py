@@ -9,23 +9,18 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import RunFailed
 from pipeline.montecarlo.dispersions import Dispersion
 from pipeline.montecarlo.plan import MonteCarlo, plan_montecarlo, result_key
-from pipeline.montecarlo.task import cached_record, damaged, errored_record, sample_task
-from pipeline.montecarlo.verdict import (
-    TABLE_NAME,
-    VERDICT_NAME,
-    MonteCarloVerdict,
-    RequirementWords,
-    judge,
-    make_table,
-    verdict_json,
-)
-from pipeline.provenance.keys import sample_version
-from pipeline.sweep.results import write_table
+
+# The samples' task and the verdict import the simulator and the analysis (two seconds):
+# imported where a sample runs or a verdict is judged, after the file is checked, so that a
+# bad file's one-line error does not wait for them.
+if TYPE_CHECKING:
+    from pipeline.montecarlo.verdict import MonteCarloVerdict, RequirementWords
 
 
 def describe(d: Dispersion) -> str:
@@ -51,6 +46,8 @@ def describe(d: Dispersion) -> str:
 
 
 def requirement_of(mc: MonteCarlo) -> RequirementWords:
+    from pipeline.montecarlo.verdict import RequirementWords
+
     r, plant = mc.base.requirements, mc.base.mission.plant
     drawn = any(k == "mission.plant.delay_steps" or k.startswith("mission.plant.timing.")
                 for k in mc.config.dispersions)
@@ -66,6 +63,7 @@ def requirement_of(mc: MonteCarlo) -> RequirementWords:
 def run_montecarlo(mc: MonteCarlo, root: Path, client, progress: bool = False,
                    worker_timeout: float = 300.0, jobs=None) -> list[dict]:
     """Every sample on ``client`` (:func:`pipeline.sweep.driver.execute_tasks`)."""
+    from pipeline.montecarlo.task import errored_record, sample_task
     from pipeline.sweep.driver import execute_tasks
 
     samples = {s.name: s for s in mc.samples}
@@ -110,10 +108,20 @@ def summary_text(v: MonteCarloVerdict, table: Path) -> str:
 def montecarlo_command(args: argparse.Namespace) -> int:
     if args.sample is not None:
         return run_one(args)
+    mc = plan_montecarlo(args.file, args.samples)
+    from pipeline.montecarlo.task import cached_record
+    from pipeline.montecarlo.verdict import (
+        TABLE_NAME,
+        VERDICT_NAME,
+        judge,
+        make_table,
+        verdict_json,
+    )
+    from pipeline.provenance.keys import sample_version
     from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
     from pipeline.sweep.driver import _raise_stop, _Stop, check_writable
+    from pipeline.sweep.results import write_table
 
-    mc = plan_montecarlo(args.file, args.samples)
     root = Path(args.logs).resolve() / mc.name
     out = Path(args.out).resolve() / mc.name
     for folder in (root, out):
@@ -164,10 +172,12 @@ def run_one(args: argparse.Namespace) -> int:
     """One sample alone (``--sample I``): drawn from its own stream, run into a log through
     the artefact store, judged, and its log's digest set beside the kept record's."""
     from pipeline.montecarlo.plan import draw_one
-    from pipeline.montecarlo.sample import judge_columns, log_digest
-    from pipeline.store.door import ArtefactStore
 
     mc, s = draw_one(args.file, args.sample)
+    from pipeline.montecarlo.sample import judge_columns, log_digest
+    from pipeline.montecarlo.task import cached_record, damaged
+    from pipeline.store.door import ArtefactStore
+
     root = Path(args.logs).resolve() / mc.name
     store = ArtefactStore(root)
     run = store.run(s.spec, expect=None)

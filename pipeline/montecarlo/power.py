@@ -32,19 +32,20 @@ import math
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
-import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.atomic_files import atomic_write_text
 from pipeline.errors import LogError, RunFailed, SpecError
 from pipeline.montecarlo.plan import resolve_montecarlo
 from pipeline.montecarlo.sealed import sealed_json, unseal
-from pipeline.montecarlo.task import keep, kept, worker
 from pipeline.spec import Sensors, Spec, load_spec, with_overrides
 from pipeline.yamlfile import read_yaml
+
+if TYPE_CHECKING:  # pandas, Dask and the simulator where a study runs, not to check its file
+    import pandas as pd
 
 TABLE_NAME = "power.parquet"
 RESULT_NAME = "power.json"
@@ -171,6 +172,7 @@ def power_task(spec: Spec, case: str, level_index: int, index: int, root: str,
     over its analysis window; its record kept and reused."""
     from pipeline.analysis.detection import detect_ripple
     from pipeline.analysis.stages import choose_window
+    from pipeline.montecarlo.task import keep, kept, worker
     from pipeline.shapes import V
     from pipeline.sim.mission import Mission
     from pipeline.sweep.progress import announce_start
@@ -308,10 +310,12 @@ def read_power(path: Path | str) -> PowerResult:
 
 
 def power_command(args: argparse.Namespace) -> int:
+    plan = plan_power(args.file, args.samples)
+    import pandas as pd
+
     from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
     from pipeline.sweep.driver import check_writable, execute_tasks
 
-    plan = plan_power(args.file, args.samples)
     root = Path(args.logs).resolve() / plan.name
     out = Path(args.out).resolve() / plan.name
     for folder in (root, out):
