@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from pipeline.analysis.confidence import confidence_verdict, lower_bound, samples_needed
+from pipeline.analysis.confidence import (
+    confidence_reachable,
+    confidence_verdict,
+    lower_bound,
+    samples_needed,
+)
 
 
 @pytest.mark.parametrize(("p", "c", "n"), [(0.9973, 0.90, 852), (0.9973, 0.95, 1109),
@@ -66,3 +71,16 @@ def test_the_bound_is_a_lower_bound_in_coverage():
     passes = rng.binomial(n, p, size=4000)
     covered = np.mean([lower_bound(int(k), n, c) <= p for k in passes])
     assert covered >= c
+
+
+@pytest.mark.parametrize("p,n", [(0.9973, 0), (0.9973, 32), (0.9973, 852), (0.9, 3), (0.5, 7)])
+def test_the_confidence_n_samples_can_reach_is_where_their_clean_bound_meets_p(p, n):
+    """Eq. 38d: C = 1 − p^N is the confidence at which N samples, none failing, bring SciPy's
+    Clopper–Pearson bound up to p exactly; at any higher confidence it stays below p."""
+    c = confidence_reachable(p, n)
+    assert c == pytest.approx(1 - p**n, rel=1e-12, abs=1e-15)
+    if n:
+        assert scipy.stats.beta.ppf(1 - c, n, 1) == pytest.approx(p, rel=1e-9)
+        assert scipy.stats.beta.ppf(1 - min(c + 1e-3, 0.999999), n, 1) < p
+        assert samples_needed(p, c - 1e-9) <= n
+        assert samples_needed(p, min(c + 1e-6, 0.999999)) > n
