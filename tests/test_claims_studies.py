@@ -88,6 +88,10 @@ def test_a_claim_on_a_study_is_deferred_until_the_full_n_has_flown(tmp_path):
     import pandas as pd
 
     assert int(pd.read_parquet(table)["ran"].sum()) == 3
+    # The index reads it under the decision: current (its own file, not a shipped one).
+    index = (tmp_path / "out" / "index.html").read_text()
+    assert "Across the dispersions</strong> (the current Monte Carlos" in index
+    assert "not decided here" not in index and ">no</span>: made by other code" not in index
 
     # Up to date now; a study's result altered: not read, deferred again.
     r = run_cli("claims", "--claims", full, "--out", tmp_path / "out")

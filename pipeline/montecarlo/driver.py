@@ -153,7 +153,7 @@ def montecarlo_command(args: argparse.Namespace) -> int:
     v = replace(judge(df, mc.name, mc.config, mc.base,
                       {k: describe(d) for k, d in sorted(mc.config.dispersions.items())},
                       requirement_of(mc), wall),
-                key=result_key(mc.path, len(mc.samples)))
+                key=result_key(mc.path, len(mc.samples)), file=str(Path(mc.path).resolve()))
     out.mkdir(parents=True, exist_ok=True)
     meta = {"pipeline.montecarlo": mc.name, "pipeline.mission": mc.base.name,
             "pipeline.base_spec_hash": mc.base.spec_hash, "pipeline.sample_version":

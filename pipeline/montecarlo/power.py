@@ -226,6 +226,7 @@ class PowerResult:
     statement: str
     wall_s: float
     key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
+    file: str = ""  # the power file it flew (absolute), to check the key against
 
 
 UNITS = {"gyro_arw": "rad/√s", "gyro_bias": "rad/s", "gyro_bias_walk": "rad/s/√s",
@@ -348,7 +349,8 @@ def power_command(args: argparse.Namespace) -> int:
     df = pd.DataFrame(records)
     df["level"] = [plan.config.levels[j] for j in df["level_index"]]
     result = replace(rates(df, plan, time.perf_counter() - t0),
-                     key=result_key(plan.path, plan.config.samples))
+                     key=result_key(plan.path, plan.config.samples),
+                     file=str(Path(plan.path).resolve()))
     path = write_power(df.drop(columns=["received"], errors="ignore"), result, out)
     print(power_text(result, path))
     errored = int((df["status"] == "error").sum())

@@ -145,15 +145,15 @@ def study_result(kind: Kind, file: Path, samples: int | None, out: Path) -> Stud
                        target)
 
 
-def is_current(kind: Kind, name: str, key: str, samples: int) -> bool:
-    """Whether a result found by name (a report folder's ``<kind>/<name>/``) was made from the
-    shipped file of that name and this code (False where no such file is shipped: its inputs
-    cannot be checked from here)."""
+def is_current(kind: Kind, name: str, key: str, samples: int, file: str = "") -> bool:
+    """Whether a result found in a report folder (``<kind>/<name>/``) was made from the file
+    it names (``file``, else the shipped file of that name) as it is now, by this code (False
+    where neither is there: its inputs cannot be checked)."""
     from pipeline.errors import SpecError
     from pipeline.montecarlo.plan import resolve_montecarlo
 
     try:
-        path = resolve_montecarlo(name)
-    except SpecError:
+        path = Path(file) if file and Path(file).is_file() else resolve_montecarlo(name)
+        return bool(key) and key == study_key(kind, path, samples)
+    except SpecError:  # gone, or no longer a valid file
         return False
-    return bool(key) and key == study_key(kind, path, samples)

@@ -90,6 +90,7 @@ class MonteCarloVerdict:
     simulated: int  # samples run by this invocation (the others: kept records)
     wall_s: float
     key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
+    file: str = ""  # the Monte Carlo file it flew (absolute), to check the key against
 
 
 def make_table(records: list[dict]) -> pd.DataFrame:

@@ -262,7 +262,8 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
                     render("montecarlo.html.j2", folder / "montecarlo.html", **ctx)]
         entries.append({"v": v, "page": folder.relative_to(out).as_posix() + "/montecarlo.html",
-                        "current": is_current("montecarlo", v.name, v.key, v.samples)})
+                        "current": is_current("montecarlo", v.name, v.key, v.samples,
+                                              v.file)})
     return written, entries
 
 
@@ -284,7 +285,8 @@ def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dic
         written += [render("power.md.j2", result.parent / "power.md", **ctx),
                     render("power.html.j2", result.parent / "power.html", **ctx)]
         entries.append({"r": r, "page": result.parent.relative_to(out).as_posix()
-                        + "/power.html", "current": is_current("power", r.name, r.key, r.samples)})
+                        + "/power.html", "current": is_current("power", r.name, r.key,
+                                                                 r.samples, r.file)})
     return written, entries
 
 
