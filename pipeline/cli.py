@@ -361,6 +361,19 @@ def _stage(sub, name: str, summary: str, example: str) -> argparse.ArgumentParse
                           formatter_class=_formatter)
 
 
+def _decision_options(s: argparse.ArgumentParser, out: str) -> None:
+    """The options of `all` and `studies`: the register, the report folder (``out`` says
+    what goes there) and the compile's processes."""
+    s.add_argument("--claims", default="claims", metavar="FILE",
+                   help="claims file, as for `claims` (default: claims, the shipped register; "
+                   "e.g. --claims claims_ci)")
+    s.add_argument("--out", default="generated_reports", metavar="DIR",
+                   help=f"{out} (default: generated_reports; e.g. --out /tmp/reports)")
+    s.add_argument("--processes", type=int, default=2, metavar="N",
+                   help="processes compiling the kernels, as for `compile` "
+                   "(default: 2; e.g. --processes 1)")
+
+
 def _dask_options(s: argparse.ArgumentParser, lifetime: bool = True) -> None:
     """Where a stage's Dask tasks run (``pipeline.sweep.cluster``): the sweeps', the Monte
     Carlos' and the power studies' options."""
@@ -396,15 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     al = _stage(sub, "all", "compile, then the claims (running the missions, analyses and "
                 "sweeps they need), then every report, as `make all` does",
                 "--claims claims --out generated_reports")
-    al.add_argument("--claims", default="claims", metavar="FILE",
-                    help="claims file, as for `claims` (default: claims, the shipped register; "
-                    "e.g. --claims claims_ci)")
-    al.add_argument("--out", default="generated_reports", metavar="DIR",
-                    help="report folder for the claims and the reports "
-                    "(default: generated_reports; e.g. --out /tmp/reports)")
-    al.add_argument("--processes", type=int, default=2, metavar="N",
-                    help="processes compiling the kernels, as for `compile` "
-                    "(default: 2; e.g. --processes 1)")
+    _decision_options(al, "report folder for the claims and the reports")
     al.set_defaults(func=_cmd_all)
 
     v = _stage(sub, "validate", "check a spec and print what its run would cost, without "
@@ -537,15 +542,8 @@ def build_parser() -> argparse.ArgumentParser:
     t = _stage(sub, "studies", "fly the studies the claims need (Monte Carlos, power studies) "
                "at their files' full N, then the claims and reports, as `make studies` does",
                "--claims claims --out generated_reports --workers 2")
-    t.add_argument("--claims", default="claims", metavar="FILE",
-                   help="claims file naming the studies (default: claims; e.g. --claims "
-                   "my_claims.yaml)")
-    t.add_argument("--out", default="generated_reports", metavar="DIR",
-                   help="report folder: DIR/montecarlo/<name>/, DIR/power/<name>/ and the "
-                   "reports (default: generated_reports; e.g. --out /tmp/reports)")
-    t.add_argument("--processes", type=int, default=2, metavar="N",
-                   help="processes compiling the kernels, as for `compile` "
-                   "(default: 2; e.g. --processes 1)")
+    _decision_options(t, "report folder: DIR/montecarlo/<name>/, DIR/power/<name>/, the claims "
+                      "and the reports")
     _dask_options(t, lifetime=False)
     t.set_defaults(func=_cmd_studies)
 
