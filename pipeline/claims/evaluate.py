@@ -100,7 +100,7 @@ class Context:
         self._baselines: dict | None = None
         self._sweeps: dict[str, tuple[dict, dict]] = {}
         self._jobs: dict = {}  # alias -> sweep.background.SweepJob, started by start_sweeps
-        self._mc_jobs: dict = {}  # alias -> sweep.background.BackgroundJob (Monte Carlo, power)
+        self._mc_jobs: dict = {}  # "kind:alias" -> sweep.background.BackgroundJob (a study)
         self._studies: dict[str, StudyResult] = {}
         self._note = None
         # Every artefact read or made, in order: with the outputs, the claims' key
@@ -191,7 +191,7 @@ class Context:
 
         if self.studies != "run":
             return
-        for kind in ("montecarlo", "power"):
+        for kind in FOLDERS:
             for alias in needed_montecarlos(self.cf, kind):
                 ref = getattr(self.cf, kind)[alias]
                 self._mc_jobs[f"{kind}:{alias}"] = start_montecarlo(

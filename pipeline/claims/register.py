@@ -394,11 +394,11 @@ def study_sources(cf: ClaimsFile, out: Path) -> dict[str, str]:
     """The studies' results under report folder ``out`` as they stand, by hash ("none"
     where there is none): a result made since the last evaluation (`make studies`) makes
     the claims evaluate again, for their key (:func:`pipeline.store.validity.claims_key`)."""
-    from pipeline.montecarlo.studies import result_files
+    from pipeline.montecarlo.studies import FOLDERS, result_files
     from pipeline.provenance.keys import file_digest
 
     out_ = {}
-    for kind in ("montecarlo", "power"):
+    for kind in FOLDERS:
         for name, ref in getattr(cf, kind).items():
             result = result_files(kind, Path(ref.file).stem, out)[1]
             out_[f"{kind} {name} result"] = file_digest(result) if result.is_file() else "none"

@@ -235,6 +235,12 @@ def montecarlo_key(ref: str | Path, samples: int | None = None) -> str:
             f"{file_digest(base.robot_path)}, samples {samples}")
 
 
+def file_samples(config: MonteCarloFile) -> int:
+    """The N a Monte Carlo file declares: its ``samples``, else the success-run count of its
+    target (eq. 38b)."""
+    return config.samples or samples_needed(config.target.p, config.target.confidence)
+
+
 def result_key(ref: str | Path, samples: int) -> str:
     """The key a Monte Carlo's verdict carries (``verdict.json``'s ``key``): what it is made
     from (:func:`montecarlo_key`, at the N flown) and the samples' code."""
@@ -270,7 +276,7 @@ def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
         raise SpecError(f"{path}: field dispersions.{bad[0]}: a body's key is "
                         "body.<bus|payload>.<mass|com|inertia>")
     nominals = body_nominals(base, bodies, path)
-    n = samples or config.samples or samples_needed(config.target.p, config.target.confidence)
+    n = samples or file_samples(config)
     name = path.stem
     indices = range(n) if only is None else [only]
     # The nominals are the fixed overrides' (a block the file sets, as mission.plant.timing,

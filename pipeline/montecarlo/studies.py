@@ -32,11 +32,9 @@ def full_samples(kind: Kind, path: Path) -> int:
     """The N the study's file declares: a Monte Carlo's ``samples``, else the success-run
     count of its target (eq. 38b); a power study's runs per mission and level."""
     if kind == "montecarlo":
-        from pipeline.analysis.confidence import samples_needed
-        from pipeline.montecarlo.plan import read_montecarlo
+        from pipeline.montecarlo.plan import file_samples, read_montecarlo
 
-        c = read_montecarlo(path)
-        return c.samples or samples_needed(c.target.p, c.target.confidence)
+        return file_samples(read_montecarlo(path))
     from pipeline.montecarlo.power import read_power_file
 
     return read_power_file(path).samples
