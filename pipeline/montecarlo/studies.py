@@ -28,16 +28,18 @@ Kind = Literal["montecarlo", "power"]
 FOLDERS: dict[str, str] = {"montecarlo": "montecarlo", "power": "power"}
 
 
-def full_samples(kind: Kind, path: Path) -> int:
-    """The N the study's file declares: a Monte Carlo's ``samples``, else the success-run
-    count of its target (eq. 38b); a power study's runs per mission and level."""
+def declared(kind: Kind, path: Path) -> tuple[int, float | None]:
+    """What the study's file declares, read once: its N (a Monte Carlo's ``samples``, else the
+    success-run count of its target, eq. 38b; a power study's runs per mission and level) and
+    a Monte Carlo's target pass probability (None for a power study)."""
     if kind == "montecarlo":
         from pipeline.montecarlo.plan import file_samples, read_montecarlo
 
-        return file_samples(read_montecarlo(path))
+        config = read_montecarlo(path)
+        return file_samples(config), config.target.p
     from pipeline.montecarlo.power import read_power_file
 
-    return read_power_file(path).samples
+    return read_power_file(path).samples, None
 
 
 def study_key(kind: Kind, path: Path, samples: int) -> str:
@@ -116,15 +118,10 @@ def study_result(kind: Kind, file: Path, samples: int | None, out: Path) -> Stud
     other inputs or code, or damaged: a damaged one is said on stderr, never read)."""
     import sys
 
-    full = full_samples(kind, file)
+    full, target = declared(kind, file)
     asked = samples or full
     name = Path(file).stem
     table, result_path = result_files(kind, name, out)
-    target = None
-    if kind == "montecarlo":
-        from pipeline.montecarlo.plan import read_montecarlo
-
-        target = read_montecarlo(file).target.p
     prov = {"source": kind, "version": "—", "file": display_path(result_path)}
     none = StudyResult(kind, name, Path(file), full, 0, None, prov, (), target)
     if not result_path.is_file() or not table.is_file():
