@@ -54,7 +54,7 @@ from pipeline.artefact_paths import log_path
 from pipeline.atomic_files import atomic_write_text
 from pipeline.bench_linalg import linalg_costs, linalg_markdown
 from pipeline.bench_linalg import summary as _stats
-from pipeline.logs import file_metadata
+from pipeline.logs import SEAL_KEY, TableDigest, file_metadata
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import LOCAL, GiordanoRobot
 from pipeline.sim.run import run_spec
@@ -170,7 +170,7 @@ def tiled_log(src: Path, dst: Path, factor: int) -> Path:
     """
     pf = pq.ParquetFile(src)
     n = pf.metadata.num_rows
-    md = {k.encode(): v.encode() for k, v in file_metadata(src).items()}
+    md = {k.encode(): v.encode() for k, v in file_metadata(src).items() if k != SEAL_KEY}
     spec = json.loads(md[b"pipeline.spec"])
     dt = spec["mission"]["dt"]
     # The metadata says what the file is, so the log passes verify_log: a mission `factor`
@@ -180,6 +180,7 @@ def tiled_log(src: Path, dst: Path, factor: int) -> Path:
                b"pipeline.spec_hash": spec_hash_of(spec).encode(),
                b"pipeline.rows": str(n * factor).encode()})
     dst.parent.mkdir(parents=True, exist_ok=True)
+    digest = TableDigest(pf.schema_arrow.names)  # its own seal: its columns are new
     with pq.ParquetWriter(dst, pf.schema_arrow.with_metadata(md), compression="zstd") as w:
         for i in range(factor):
             for rg in range(pf.num_row_groups):
@@ -188,6 +189,8 @@ def tiled_log(src: Path, dst: Path, factor: int) -> Path:
                 t = t.set_column(t.schema.get_field_index("step"), "step", pa.array(step))
                 t = t.set_column(t.schema.get_field_index("t"), "t", pa.array(step * dt))
                 w.write_table(t)
+                digest.update(t)
+        w.add_key_value_metadata({SEAL_KEY: digest.hexdigest()})
     return dst
 
 

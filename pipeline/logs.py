@@ -71,9 +71,13 @@ class LogMeta:
 
 
 # An imported log's own hashes (JSON {"table", "record"}): the SHA-256 of its columns' values
-# and of its pipeline.import text, checked on every read. A simulated log needs none: the spec
-# it records makes it again, bitwise; an imported one cannot be made again without its source.
+# and of its pipeline.import text, checked on every read.
 IMPORT_HASH_KEY = "pipeline.import_sha256"
+# A simulated log's seal: the SHA-256 of its columns' values (:class:`TableDigest`), checked
+# on every read, reuse included. Its spec would make it again, bitwise, but only if someone
+# knew to: without the seal an edited or byte-damaged log whose metadata is intact would be
+# analysed (and reused by ``run``) as if it were the simulator's.
+SEAL_KEY = "pipeline.table_sha256"
 
 
 class TableDigest:
@@ -107,18 +111,24 @@ def _arrow_column(values: np.ndarray) -> pa.Array:
     return pa.FixedSizeListArray.from_arrays(flat, values.shape[1])
 
 
-def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
-    """Write columns (1-D, or 2-D as fixed-size lists) and metadata to Parquet, atomically.
-    An imported log's metadata gets its own hashes (IMPORT_HASH_KEY) of these columns and of
-    its import record."""
-    path = Path(path)
-    table = pa.table({k: _arrow_column(v) for k, v in columns.items()})
+def seal_keys(metadata: dict[str, str], digest: TableDigest) -> dict[str, str]:
+    """The keys that seal a log whose columns hashed to ``digest``: an imported log's own
+    hashes (IMPORT_HASH_KEY: its columns and its import record), a simulated log's SEAL_KEY."""
     if "pipeline.import" in metadata:
-        digest = TableDigest(table.column_names)
-        digest.update(table)
-        metadata = metadata | {IMPORT_HASH_KEY: json.dumps({
+        return {IMPORT_HASH_KEY: json.dumps({
             "table": digest.hexdigest(),
             "record": hashlib.sha256(metadata["pipeline.import"].encode()).hexdigest()})}
+    return {SEAL_KEY: digest.hexdigest()}
+
+
+def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, str]) -> None:
+    """Write columns (1-D, or 2-D as fixed-size lists) and metadata to Parquet, atomically,
+    sealed (:func:`seal_keys`)."""
+    path = Path(path)
+    table = pa.table({k: _arrow_column(v) for k, v in columns.items()})
+    digest = TableDigest(table.column_names)
+    digest.update(table)
+    metadata = metadata | seal_keys(metadata, digest)
     table = table.replace_schema_metadata({k.encode(): v.encode() for k, v in metadata.items()})
     tmp = atomic_target(path)
     try:
@@ -135,8 +145,9 @@ def write_table(path: Path, columns: dict[str, np.ndarray], metadata: dict[str, 
 class LogWriter:
     """A log written row group by row group into a temporary file beside ``path``, so a long
     run's memory stays at one row group; :meth:`close` puts the keys known only at the end
-    (status, failed step, error, row count) into the Parquet footer, then fsyncs and renames:
-    a run killed before that leaves no file that looks complete (architecture §6).
+    (status, failed step, error, row count) and the seal of the columns written
+    (:func:`seal_keys`) into the Parquet footer, then fsyncs and renames: a run killed before
+    that leaves no file that looks complete (architecture §6).
 
     Use as a context manager: leaving it without :meth:`close` removes the temporary file.
     """
@@ -147,6 +158,7 @@ class LogWriter:
         self.rows = 0
         self._tmp = atomic_target(self.path)
         self._writer: pq.ParquetWriter | None = None
+        self._digest: TableDigest | None = None
 
     def write(self, columns: dict[str, np.ndarray]) -> None:
         """Append one row group (every column, same length)."""
@@ -156,7 +168,9 @@ class LogWriter:
                 schema = table.schema.with_metadata(
                     {k.encode(): v.encode() for k, v in self.metadata.items()})
                 self._writer = pq.ParquetWriter(self._tmp, schema, compression="zstd")
+                self._digest = TableDigest(table.column_names)
             self._writer.write_table(table, row_group_size=ROW_GROUP)
+            self._digest.update(table)
         except OSError as exc:
             raise cannot_write(self.path, exc) from None
         self.rows += table.num_rows
@@ -166,7 +180,8 @@ class LogWriter:
         if self._writer is None:
             raise ValueError("a log needs at least one write, even of zero rows")
         try:
-            self._writer.add_key_value_metadata({**self.metadata, **final})
+            self._writer.add_key_value_metadata(
+                {**self.metadata, **final, **seal_keys(self.metadata, self._digest)})
             self._writer.close()
             with open(self._tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
@@ -437,7 +452,10 @@ def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
       It is looked for at the recorded ``pipeline.robot_file``, then as the spec's
       ``robot.file`` beside the log and on the spec search path (logs move between machines);
     - every numeric column is finite, but the condition numbers (``MAY_BE_INFINITE``), which
-      may be +inf at an exact singularity and never NaN.
+      may be +inf at an exact singularity and never NaN;
+    - the columns' values hash to the seal their writer recorded (SEAL_KEY for a simulated
+      log, IMPORT_HASH_KEY for an imported one): a value edited, a column removed or cast, a
+      byte damaged where it still decodes.
 
     ``digest``: how a robot file is hashed (the artefact store's, which hashes each once).
 
@@ -457,17 +475,20 @@ def verify_log(path: Path | str, digest: Callable[[Path], str] = file_digest
     meta = _meta(path, pf)
     spec = _verified_spec(path, meta, pf.metadata.num_rows)
     spec._robot_path = _recorded_robot(path, meta, spec, digest)
-    hashes = _import_hashes(path, pf) if meta.imported is not None else None
-    table = TableDigest(pf.schema_arrow.names) if hashes is not None else None
+    imported = meta.imported is not None
+    sealed = _import_hashes(path, pf)["table"] if imported else _seal(path, pf)
+    table = TableDigest(pf.schema_arrow.names)
     try:
         _check_rows(path, pf, spec.mission.dt, table)
     except (OSError, pa.ArrowException) as exc:  # a data page that does not decode
         raise _damaged(path, "data", f"a row group does not read "
                        f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
                        ) from None
-    if table is not None and table.hexdigest() != hashes["table"]:
-        raise _damaged(path, IMPORT_HASH_KEY, "the columns' values are not the ones the "
-                       "import wrote (changed after the import)")
+    if table.hexdigest() != sealed:
+        raise _damaged(path, IMPORT_HASH_KEY if imported else SEAL_KEY,
+                       "the columns' values are not the ones the "
+                       + ("import wrote (changed after the import)" if imported else
+                          "simulator wrote (changed or damaged since the run)"))
     return VerifiedLog(path, meta, spec, sha, pf.metadata.num_rows, pf)
 
 
@@ -553,10 +574,19 @@ def _import_hashes(path: Path, pf: pq.ParquetFile) -> dict:
     return hashes
 
 
+def _seal(path: Path, pf: pq.ParquetFile) -> str:
+    """A simulated log's seal (SEAL_KEY): the SHA-256 its writer recorded of its columns."""
+    seal = _footer(pf).get(SEAL_KEY, "")
+    if len(seal) != 64:
+        raise _damaged(path, SEAL_KEY, "a simulated log without the seal of its columns "
+                       "(written before logs carried one, or edited): run it again")
+    return seal
+
+
 def _check_rows(path: Path, pf: pq.ParquetFile, dt: float, digest: TableDigest | None = None
                 ) -> None:
     """Steps numbered 0…n−1, t = step·dt, and finite values, row group by row group; each
-    row group into ``digest`` when given (an imported log's table hash)."""
+    row group into ``digest`` when given (the log's seal)."""
     names = pf.schema_arrow.names
     _check_columns(path, pf, ["step", "t"])
     offset = 0

@@ -6,6 +6,8 @@ failure is reproducible from the seed printed in its message.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import subprocess
 import sys
@@ -56,6 +58,27 @@ def run_cli(*args: str | Path, cwd: Path | None = None, timeout: float = 120
                           timeout=timeout, env=env)
 
 
+def run_cli_in_process(*args: str | Path, cwd: Path | None = None
+                       ) -> subprocess.CompletedProcess:
+    """``python -m pipeline ARGS`` as :func:`run_cli` returns it, run by ``pipeline.cli.main``
+    in this process: for the many cases of one command's bad input, where a fresh
+    interpreter (about a second each) would test only the start of Python again. Each
+    command keeps a test through :func:`run_cli`. An exception that escapes ``main`` (what
+    would be a traceback) fails the test that called it."""
+    from pipeline.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    here = Path.cwd()
+    try:
+        os.chdir(cwd or PROJECT_ROOT)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main([str(a) for a in args])
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["pipeline", *map(str, args)], code, out.getvalue(),
+                                       err.getvalue())
+
+
 SHORT = ("short_nominal", "short_omega_ripple_dt010", "short_omega_ripple_imex")
 
 
@@ -80,6 +103,18 @@ def footer_metadata(path: Path) -> dict[bytes, bytes]:
     from pipeline.logs import file_metadata
 
     return {k.encode(): v.encode() for k, v in file_metadata(path).items()}
+
+
+def sealed(table, metadata: dict[bytes, bytes]):
+    """``table`` with ``metadata`` and the seal of its own columns (``pipeline.logs.SEAL_KEY``),
+    as the simulator's writer would seal it: for a test that rewrites a log to reach a check
+    other than the seal (a log that is whole but wrong in another way)."""
+    from pipeline.logs import SEAL_KEY, TableDigest
+
+    digest = TableDigest(table.column_names)
+    digest.update(table)
+    return table.replace_schema_metadata({**metadata,
+                                          SEAL_KEY.encode(): digest.hexdigest().encode()})
 
 
 # -- The kernels: compiled once per session, before the first test ---------------------------

@@ -10,7 +10,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import footer_metadata
+from conftest import footer_metadata, run_cli_in_process, sealed
 
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_chunk, sign_continuous
@@ -170,8 +170,9 @@ def test_tampered_log_fails_provenance(short_logs, tmp_path):
     s[57] *= 1.001
     bad = tmp_path / "tampered" / "run.parquet"
     bad.parent.mkdir()
-    pq.write_table(t.set_column(t.schema.get_field_index("s_min_G"), "s_min_G",
-                                pa.array(s)).replace_schema_metadata(footer_metadata(src)), bad)
+    # Sealed again: a log whole but for one σ, which the provenance check must catch.
+    pq.write_table(sealed(t.set_column(t.schema.get_field_index("s_min_G"), "s_min_G",
+                                       pa.array(s)), footer_metadata(src)), bad)
     r = _analyze(bad, "--out", tmp_path / "out")
     assert r.returncode == 1
     assert "step 57" in r.stderr
@@ -189,7 +190,7 @@ def _write_variant(src, dst, drop=None, meta=None, rows=None):
         md.pop(drop.encode())
     md.update(meta or {})
     dst.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(t.replace_schema_metadata(md), dst)
+    pq.write_table(sealed(t, md), dst)
     return dst
 
 
@@ -219,7 +220,7 @@ def test_bad_logs_exit_2_with_one_line(short_logs, tmp_path, case, needle):
                                     b"pipeline.failed_step": b"12"})
     else:
         path, extra = src, ["--window-start", "100"]
-    r = _analyze(path, "--out", tmp_path / "out", *extra)
+    r = run_cli_in_process("analyze", path, "--out", tmp_path / "out", *extra)
     assert r.returncode == 2
     assert needle in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import run_cli_in_process
 from report_fixtures import built, run_cli
 
 from pipeline.claims.evaluate import compare_values, dig
@@ -71,7 +72,7 @@ def test_a_threshold_the_data_cannot_meet_fails_and_names_the_claim(tmp_path):
 def test_bad_claims_files_are_one_line_errors_before_any_run(tmp_path, check, needle):
     path = claims_file(tmp_path, [{"id": "B1", "statement": "s", "expect": "hold",
                                    "checks": [check]}])
-    r = run_cli("claims", "--claims", path, "--out", tmp_path / "out")
+    r = run_cli_in_process("claims", "--claims", path, "--out", tmp_path / "out")
     assert r.returncode == 2
     assert needle in r.stderr and "B1" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
@@ -451,7 +452,7 @@ def test_bad_claims_files_are_one_line_spec_errors(tmp_path, text, needle):
     path.write_text(text)
     with pytest.raises(SpecError, match=re.escape(needle)):
         load_claims(path)
-    r = run_cli("claims", "--claims", str(path), "--out", str(tmp_path / "out"))
+    r = run_cli_in_process("claims", "--claims", str(path), "--out", str(tmp_path / "out"))
     assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 

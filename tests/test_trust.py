@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import footer_metadata, run_cli
+from conftest import footer_metadata, run_cli, run_cli_in_process, sealed
 
 from pipeline.analysis.stages import analyze_log
 from pipeline.claims.baselines import compare_logs
@@ -41,7 +41,7 @@ def _rewrite(src: Path, dst: Path, table: pa.Table | None = None,
     md = footer_metadata(src)
     md.update({k.encode(): v.encode() for k, v in (meta or {}).items()})
     dst.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(t.replace_schema_metadata(md), dst)
+    pq.write_table(sealed(t, md), dst)
     return dst
 
 
@@ -100,7 +100,7 @@ def test_a_tampered_log_is_refused_with_exit_1_and_nothing_written(log, tmp_path
     path, needle = _cases(log, tmp_path)[case]
     with pytest.raises(LogDamaged, match="tampered or damaged"):
         verify_log(path)
-    r = run_cli("analyze", str(path), "--out", str(tmp_path / "out"))
+    r = run_cli_in_process("analyze", str(path), "--out", str(tmp_path / "out"))
     assert r.returncode == 1, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and str(path) in lines[0] and needle in lines[0], lines
@@ -221,7 +221,7 @@ def _copy_reports(src: Path, dst: Path) -> Path:
 def test_report_refuses_a_damaged_analysis_with_exit_2(analysed, tmp_path, damage, needle):
     out = _copy_reports(analysed, tmp_path / "rep")
     damage(out / "t3" / "analysis.json")
-    r = run_cli("report", "--out", str(out))
+    r = run_cli_in_process("report", "--out", str(out))
     assert r.returncode == 2, r.stderr
     line = r.stderr.strip().splitlines()[-1]
     assert "analysis.json" in line and needle in line, line
@@ -278,7 +278,7 @@ def test_a_mission_over_budget_is_refused_before_any_work(tmp_path, monkeypatch,
     spec = tmp_path / "big.yaml"
     spec.write_text(yaml_text)
     t0 = _time.perf_counter()
-    r = run_cli("run", str(spec), "--out", str(tmp_path / "out"))
+    r = run_cli_in_process("run", str(spec), "--out", str(tmp_path / "out"))
     took = _time.perf_counter() - t0
     assert r.returncode == 2, r.stderr
     line = r.stderr.strip().splitlines()[-1]
@@ -401,7 +401,7 @@ def test_a_sweep_whose_log_folder_is_a_file_is_exit_2_and_creates_nothing(tmp_pa
 
 @pytest.mark.parametrize("value", ["nan", "inf", "-1"])
 def test_a_window_start_that_is_not_a_time_is_exit_2(log, tmp_path, value):
-    r = run_cli("analyze", str(log), "--window-start", value, "--out", str(tmp_path / "o"))
+    r = run_cli_in_process("analyze", log, "--window-start", value, "--out", tmp_path / "o")
     assert r.returncode == 2, r.stderr
     assert "window" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
