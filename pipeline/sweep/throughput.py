@@ -1,4 +1,5 @@
-"""Sweep throughput for ``make bench``: points per second and the per-point overhead of Dask.
+"""Sweep and Monte Carlo throughput for ``make bench``: tasks per second and the per-task
+overhead of Dask, so a user can size a study for a cluster (docs/montecarlo.md).
 
 The same 32-point grid (8 values of ``mission.dt`` × 4 of the bus damping gain, 20-s missions
 of the seed nominal) runs in three settings, each into a fresh log folder (nothing cached):
@@ -13,6 +14,10 @@ has then been busy once; the first task on a worker pays for loading the compile
 overhead is ``steady_s_per_point × workers − task_s``, where ``task_s`` is the median time a
 task spent simulating and analysing (its own clock), and ``overhead_ratio`` = overhead /
 ``task_s``. Target: below 1.
+
+The Monte Carlo's (:func:`montecarlo_throughput`) are the same figures for its first
+:data:`MC_SAMPLES` samples (a sample's task: its flight, its verdict and its kept record;
+``task_s`` its own clock of the flight and the verdict), in the same three settings.
 """
 
 from __future__ import annotations
@@ -30,6 +35,10 @@ DTS = "0.005,0.01,0.015,0.0175,0.02,0.025,0.03,0.04"
 BUS_D = "1.0,1.5,2.0,2.5"
 SETS = [f"mission.dt={DTS}", f"controller.gains.bus.D={BUS_D}", "mission.duration=20"]
 SLURM_WALLTIME = "00:20:00"
+# The Monte Carlo's throughput: the first samples of the bench's 852-sample Monte Carlo (60 s
+# sampled-data missions with one step of delay), as many as fill two workers several times.
+MC_FILE = "bench_sampled_delay"
+MC_SAMPLES = 24
 
 
 @dataclass(frozen=True)
@@ -108,22 +117,47 @@ def slurm_ready() -> str:
 
 def measure(setting: str, root: Path) -> Throughput:
     """Run the grid in ``setting`` into ``root`` (a fresh folder) and measure it."""
-    import dask
-
-    from pipeline.sweep.cluster import ClusterOptions, open_client
     from pipeline.sweep.driver import execute, plan_sweep
     from pipeline.sweep.point import run_point
 
     sweep = plan_sweep("nominal", SETS, name=f"bench_{setting}", logs=root / "logs",
                        out=root / "out", workers=2)
+    return _timed(setting, root,
+                  lambda: (run_point(p.spec, str(sweep.log_dir)) for p in sweep.points),
+                  lambda client, timeout, jobs: execute(sweep, client, worker_timeout=timeout,
+                                                        jobs=jobs))
+
+
+def measure_montecarlo(setting: str, root: Path, samples: int = MC_SAMPLES) -> Throughput:
+    """The first ``samples`` samples of the bench's Monte Carlo (:data:`MC_FILE`) in
+    ``setting``, their records kept under ``root`` (a fresh folder: every sample flies)."""
+    from pipeline.montecarlo.driver import run_montecarlo
+    from pipeline.montecarlo.plan import plan_montecarlo
+    from pipeline.montecarlo.task import sample_task
+
+    mc = plan_montecarlo(MC_FILE, samples)
+    records = root / "records"
+    ripple = mc.config.ripple_max
+    return _timed(setting, root,
+                  lambda: (sample_task(s.spec, s.index, list(s.seed), s.draws, ripple,
+                                       str(records), "bench") for s in mc.samples),
+                  lambda client, timeout, jobs: run_montecarlo(mc, records, client, False,
+                                                               timeout, jobs))
+
+
+def _timed(setting: str, root: Path, here, on_cluster) -> Throughput:
+    """Start-up, then the tasks: ``here()``, a generator of their calls, one after the other
+    in this process (each record stamped as it returns), or ``on_cluster(client,
+    worker_timeout, jobs)`` on the setting's 2 workers (the driver stamps them)."""
+    import dask
+
+    from pipeline.sweep.cluster import ClusterOptions, open_client
+
     t0 = time.perf_counter()
     if setting == "inprocess":
         _warm_here(root)
         startup = time.perf_counter() - t0
-        records = []
-        for p in sweep.points:
-            rec = run_point(p.spec, str(sweep.log_dir))
-            records.append({**rec, "received": time.perf_counter()})
+        records = [{**rec, "received": time.perf_counter()} for rec in here()]
         return throughput_of(setting, 1, startup, time.perf_counter() - t0, records)
     slurm = setting.startswith("slurm")
     if slurm and (why := slurm_ready()):
@@ -136,8 +170,7 @@ def measure(setting: str, root: Path) -> Throughput:
         session.client.wait_for_workers(2, timeout=options.worker_timeout)
         _warm(session.client, root)
         startup = time.perf_counter() - t0
-        records = execute(sweep, session.client, worker_timeout=options.worker_timeout,
-                          jobs=session.jobs)
+        records = on_cluster(session.client, options.worker_timeout, session.jobs)
         wall = time.perf_counter() - t0
     return throughput_of(setting, 2, startup, wall, records)
 
@@ -149,4 +182,14 @@ def sweep_throughput(settings: tuple[str, ...] = ("inprocess", "local2", "slurm2
         for s in settings:
             progress(f"sweep throughput: {s}, 32 points")
             out[s] = measure(s, Path(tmp) / s)
+    return out
+
+
+def montecarlo_throughput(settings: tuple[str, ...] = ("inprocess", "local2", "slurm2"),
+                          progress=print) -> dict[str, Throughput]:
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in settings:
+            progress(f"Monte Carlo throughput: {s}, {MC_SAMPLES} samples of {MC_FILE}")
+            out[s] = measure_montecarlo(s, Path(tmp) / s)
     return out
