@@ -12,8 +12,14 @@ Estimated from the spec alone, before anything is allocated:
   ``MAX_SWEEP_POINTS``, each point a mission within the budget, the time divided among the
   workers.
 
-Defaults: memory half of this machine's, time 24 hours. ``BREVE_MEMORY_BUDGET_GB`` and
-``BREVE_TIME_BUDGET_H`` override them (documented in the README).
+Memory: the least of half this machine's RAM, the memory limit of the process's cgroup, what
+the address-space limit (``ulimit -v``, RLIMIT_AS, as cluster nodes set) leaves beyond the
+address space the process has already reserved, and ``BREVE_MEMORY_BUDGET_GB`` if set
+(:func:`memory_limit`). Time: 24 hours, or ``BREVE_TIME_BUDGET_H`` (documented in the README).
+
+Files are read through :func:`pipeline.bounded_read.read_at_most`, which never reserves
+more than the data read so far: a stream or a device (a FIFO, ``/dev/zero``) is read in
+chunks and stops at its bound.
 """
 
 from __future__ import annotations
@@ -40,6 +46,10 @@ ROW_FLOATS = row_size(RobotShape(tuple(f"joint{i}" for i in range(TASK_DOF))))
 ROW_BYTES = 3 * 8 * ROW_FLOATS
 POINT_BYTES = 7 * 8
 MAX_SWEEP_POINTS = 10_000
+# The most samples a Monte Carlo or a power study may draw (counted before any is drawn): ten
+# times the 10⁴ a cluster study is sized for (docs/montecarlo.md); p = 0.99999 at 90 % needs
+# 230,258 (eq. 38b), which this refuses rather than draw for minutes and grow past memory.
+MAX_SAMPLES = 100_000
 DEFAULT_TIME_H = 24.0
 
 
@@ -50,14 +60,58 @@ class Budget:
 
     @classmethod
     def from_environment(cls) -> Budget:
-        """The budget in force: the defaults, or the environment's overrides."""
-        import psutil
-
+        """The budget in force: the machine's and the process's limits (:func:`memory_limit`),
+        lowered by the environment's override; the time budget or its override."""
         mem = _env_float("BREVE_MEMORY_BUDGET_GB")
         hours = _env_float("BREVE_TIME_BUDGET_H")
-        return cls(memory_bytes=(mem * 2**30 if mem is not None
-                                 else 0.5 * psutil.virtual_memory().total),
+        limit = memory_limit()
+        return cls(memory_bytes=min(limit, mem * 2**30) if mem is not None else limit,
                    seconds=3600.0 * (hours if hours is not None else DEFAULT_TIME_H))
+
+
+def memory_limit() -> float:
+    """Bytes this process may use: the least of half the RAM, its cgroup's memory limit and
+    what RLIMIT_AS leaves (the soft limit less the address space already reserved: Python,
+    NumPy, LLVM and the libraries take some hundreds of MB of it before any data)."""
+    import resource
+
+    import psutil
+
+    limits = [0.5 * psutil.virtual_memory().total]
+    cgroup = cgroup_memory_limit()
+    if cgroup is not None:
+        limits.append(cgroup)
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        limits.append(max(soft - psutil.Process().memory_info().vms, 0))
+    return float(min(limits))
+
+
+def cgroup_memory_limit() -> float | None:
+    """The memory limit of this process's cgroup (v2 ``memory.max``, v1
+    ``memory.limit_in_bytes``), None where there is none or it cannot be read."""
+    from pathlib import Path
+
+    try:
+        lines = Path("/proc/self/cgroup").read_text().splitlines()
+    except OSError:
+        return None
+    candidates = []
+    for line in lines:
+        _, controllers, where = [*line.split(":", 2), "", ""][:3]
+        where = where.lstrip("/")
+        if controllers == "":  # v2: one unified hierarchy
+            candidates.append(Path("/sys/fs/cgroup") / where / "memory.max")
+        elif "memory" in controllers.split(","):
+            candidates.append(Path("/sys/fs/cgroup/memory") / where / "memory.limit_in_bytes")
+    for path in candidates:
+        try:
+            text = path.read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 2**60:  # v1 writes "no limit" as a huge number
+            return float(text)
+    return None
 
 
 def _env_float(name: str) -> float | None:
@@ -127,6 +181,25 @@ def check_sweep_size(n_points: int, what: str) -> None:
     if n_points > MAX_SWEEP_POINTS:
         raise SpecError(f"{what}: the grid has {n_points:,} points, over the limit of "
                         f"{MAX_SWEEP_POINTS:,} a sweep may have")
+
+
+def check_samples(n: int, what: str) -> None:
+    """SpecError when a study would draw more than ``MAX_SAMPLES`` samples."""
+    if n > MAX_SAMPLES:
+        raise SpecError(f"{what}: {n:,} samples, over the limit of {MAX_SAMPLES:,} a study may "
+                        "draw (the N a target implies grows as ln(1 − C)/ln p, eq. 38b)")
+
+
+def check_study_time(seconds: float, n: int, workers: int, what: str,
+                     budget: Budget | None = None) -> None:
+    """SpecError when ``n`` samples estimated at ``seconds`` in all, shared among
+    ``workers``, exceed the time budget."""
+    budget = budget or Budget.from_environment()
+    total = seconds / max(workers, 1)
+    if total > budget.seconds:
+        raise SpecError(f"{what}: {n:,} samples on {workers} workers would take about "
+                        f"{_h(total)}, over the time budget of {_h(budget.seconds)} "
+                        f"(BREVE_TIME_BUDGET_H)")
 
 
 def check_sweep_time(per_point_seconds: float, n_points: int, workers: int, what: str,

@@ -396,6 +396,13 @@ def _dask_options(s: argparse.ArgumentParser, lifetime: bool = True) -> None:
                        "(default: from the walltime; 0: never; e.g. --lifetime 1500)")
 
 
+def _study_force(s: argparse.ArgumentParser, kind: str) -> None:
+    s.add_argument("--force", action="store_true",
+                   help=f"replace the results another {kind} file of the same name keeps in "
+                   "DIR/<name>/ of --logs and --out (default: refused in one line, nothing "
+                   "touched; e.g. --force)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from pipeline.version import package_version
 
@@ -584,6 +591,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--out", default="generated_reports/montecarlo", metavar="DIR",
                    help="writes DIR/<montecarlo>/montecarlo.parquet and verdict.json "
                    "(default: generated_reports/montecarlo; e.g. --out /tmp/montecarlo)")
+    _study_force(m, "montecarlo")
     m.set_defaults(func=_cmd_montecarlo)
 
     w = _stage(sub, "power", "the ripple detectors' false alarms and misses against sensor "
@@ -600,6 +608,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--out", default="generated_reports/power", metavar="DIR",
                    help="writes DIR/<name>/power.parquet and power.json "
                    "(default: generated_reports/power; e.g. --out /tmp/power)")
+    _study_force(w, "power")
     w.set_defaults(func=_cmd_power)
 
     k = _stage(sub, "compile", "compile the Numba kernels into their cache once, on two cores "

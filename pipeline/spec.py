@@ -40,6 +40,18 @@ NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
 PositiveInt = Annotated[int, Field(gt=0)]
+# The gains of eqs. 12, 13 and 37f, in SI units: a stiffness up to GAIN_MAX, a damping from
+# DAMPING_MIN to GAIN_MAX. Within them, with the robots' reduced inertias (10⁻³ to 10³) and a
+# step from 10⁻⁴ to 1 s, every product the loop forms (dt·μ, M̆ + dt·D̆, the map's entries)
+# and the critical step 2/μ stay finite and far from double precision's ends; 10³⁰⁸ overflowed
+# the damping modes' eigenproblem, 10⁻³⁰⁰ the critical step.
+GAIN_MAX = 1e6
+DAMPING_MIN = 1e-6
+Stiffness = Annotated[float, Field(ge=0, le=GAIN_MAX, allow_inf_nan=False)]
+Damping = Annotated[float, Field(ge=DAMPING_MIN, le=GAIN_MAX, allow_inf_nan=False)]
+# A seed of NumPy's SeedSequence: a non-negative integer (it refuses a negative one deep in a
+# run), below 2⁶⁴.
+Seed = Annotated[int, Field(ge=0, lt=2**64)]
 
 
 class _Block(BaseModel):
@@ -132,7 +144,7 @@ class SamplingDefault(_Block):
 class ConfigSampling(_Block):
     """Startup configuration sampler (not the runtime derate ``controller.base.conditioning``)."""
 
-    seed: int = 0
+    seed: Seed = 0
     default: SamplingDefault = SamplingDefault()
     low: NonNegative = 0.01
     high: Positive = 0.05
@@ -140,8 +152,8 @@ class ConfigSampling(_Block):
 
 
 class BlockGain(_Block):
-    K: NonNegative
-    D: Positive
+    K: Stiffness
+    D: Damping
 
 
 class Gains(_Block):
@@ -150,15 +162,15 @@ class Gains(_Block):
     bus: BlockGain = BlockGain(K=2.0, D=2.0)
     cam_pos: BlockGain = BlockGain(K=4.0, D=8.0)
     cam_ori: BlockGain = BlockGain(K=1.0, D=1.0)
-    posture: NonNegative = 0.0
+    posture: Stiffness = 0.0
 
 
 class ComGains(_Block):
     """CoM loop gains (eq. 12), per unit mass (s⁻², s⁻¹, s⁻³) and the integral bound (m·s)."""
 
-    K: NonNegative = 0.638
-    D: Positive = 1.786
-    Ki: NonNegative = 0.0
+    K: Stiffness = 0.638
+    D: Damping = 1.786
+    Ki: Stiffness = 0.0
     i_max: NonNegative = 1.0
 
 
@@ -193,8 +205,8 @@ class NullSpaceImpedance(_Block):
     (eq. 16). Only a redundant arm (n > 6) has one; it has no default, as it sets a damping
     mode of its own (μ = eig(Λ_n⁻¹ D))."""
 
-    K: NonNegative = 0.0
-    D: Positive
+    K: Stiffness = 0.0
+    D: Damping
     rate: Positive = 1.0
     acc: Positive = 10.0
 
@@ -216,7 +228,7 @@ class Sensors(_Block):
     enters the joint rates taken from successive readings), drawn from ``seed``'s stream. The
     bus pose and linear velocity are measured exactly."""
 
-    seed: int = 0
+    seed: Seed = 0
     gyro_arw: NonNegative = 0.0
     gyro_bias: NonNegative = 0.0
     gyro_bias_walk: NonNegative = 0.0
@@ -233,7 +245,7 @@ class Timing(_Block):
 
     delay_fraction: float = Field(default=0.0, ge=0.0, lt=1.0)
     jitter: float = Field(default=0.0, ge=0.0, le=1.0)
-    seed: int = 0
+    seed: Seed = 0
 
     @model_validator(mode="after")
     def _within_the_step(self) -> Timing:
@@ -322,7 +334,7 @@ class Target(_Block):
     panel_span: Positive = 2.5
     panel_width: Positive = 1.0
     n_points: PositiveInt = 1500
-    seed: int = 7
+    seed: Seed = 7
 
     @field_validator("bus_size")
     @classmethod

@@ -18,7 +18,12 @@ from ruamel.yaml import YAML
 from ruamel.yaml.constructor import DuplicateKeyError
 from ruamel.yaml.error import MarkedYAMLError, YAMLError
 
+from pipeline.bounded_read import read_at_most
 from pipeline.errors import SpecError
+
+# A spec, a register, a mapping or a study file is a few kB: a file past this is not one
+# (``/dev/zero`` would otherwise be read until memory runs out).
+YAML_MAX_BYTES = 16 << 20
 
 
 def _loader() -> YAML:
@@ -58,9 +63,13 @@ def read_yaml(path: Path | str, what: str = "YAML file") -> dict:
     """A YAML file that must hold a mapping (a spec, a claims register, the note)."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with open(path, "rb") as fh:
+            raw = read_at_most(fh, YAML_MAX_BYTES)
     except OSError as exc:
         raise SpecError(f"{path}: cannot read the {what}: {exc.strerror}") from None
+    if len(raw) > YAML_MAX_BYTES:
+        raise SpecError(f"{path}: the {what} is longer than {YAML_MAX_BYTES >> 20} MiB (a "
+                        "device or a stream?): not a YAML file of this project")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:

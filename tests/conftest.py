@@ -72,7 +72,10 @@ def run_cli_in_process(*args: str | Path, cwd: Path | None = None
     try:
         os.chdir(cwd or PROJECT_ROOT)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = main([str(a) for a in args])
+            try:
+                code = main([str(a) for a in args])
+            except SystemExit as exc:  # argparse's own refusals: usage, then its error
+                code = exc.code if isinstance(exc.code, int) else 2
     finally:
         os.chdir(here)
     return subprocess.CompletedProcess(["pipeline", *map(str, args)], code, out.getvalue(),

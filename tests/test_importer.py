@@ -1043,3 +1043,35 @@ def test_the_jitter_bound_holds_a_row_against_the_jittered_end_stamps():
     assert tb.max_deviation == pytest.approx(2 * J * dt, rel=2e-3) and tb.jitter_bound == J
     with pytest.raises(SpecError, match="jitter allowed"):
         even_time_base(t, 0.0, "x", jitter=0.9 * J)
+
+
+def test_a_jitter_bound_above_a_sixth_accepts_every_step_within_it():
+    """Issue 49: with J between 1/6 and 1/4 a genuine step can be as short as (1 − 2J)·dt,
+    below the dt/1.5 a row too many is judged by: such stamps (row 5 J·dt late, row 6 J·dt
+    early: a step of (1 − 2J)·dt) are within the bound and must be taken; a row too many (a
+    step of half a dt) is still refused."""
+    from pipeline.importer.timebase import even_time_base
+
+    dt, J = 0.03, 0.2
+    t = np.arange(40) * dt
+    t[5] += J * dt * 0.999
+    t[6] -= J * dt * 0.999
+    tb = even_time_base(t, 0.0, "jittered", J)
+    assert tb.max_deviation <= 2 * J * dt
+    extra = np.sort(np.append(np.arange(40) * dt, 10.5 * dt))
+    with pytest.raises(SpecError, match="uneven time base"):
+        even_time_base(extra, 0.0, "extra", J)
+
+
+def test_a_log_imported_with_jitter_is_analysed_with_its_controller(nominal, tmp_path):
+    """The step the import draws from jittered end stamps is known to 2(J·dt + r)/(N − 1),
+    not exactly: the controller's nominal step is this log's step within that."""
+    cols, _ = nominal
+    rng = np.random.default_rng(49)
+    dt = 0.03
+    t = cols["t"] + rng.uniform(-0.1, 0.1, len(cols["t"])) * dt
+    src = _written(tmp_path, cols["q"], cols["v"], t)
+    done = import_log(src, _mapping(max_jitter=0.15), "jc", tmp_path / "logs")
+    assert verify_log(done.path).spec.mission.dt != dt  # drawn from the end stamps
+    rec = _analyse(done.path, tmp_path / "rep", controller="short_nominal")
+    assert rec.damping is not None

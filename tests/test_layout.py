@@ -73,8 +73,8 @@ def test_the_cycle_finder_finds_a_cycle():
 # only units of its own layer or below. Data flows up: sim writes logs, analysis reads them,
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
-    ("errors", "atomic_files", "paths", "artefact_paths", "log_layout", "shapes", "yamlfile",
-     "version", "progress", "provenance", "platform", "orphans"),
+    ("errors", "atomic_files", "bounded_read", "paths", "artefact_paths", "log_layout",
+     "shapes", "yamlfile", "version", "progress", "provenance", "platform", "orphans"),
     ("spec", "budget"),
     ("logs",),
     ("sim", "importer"),

@@ -51,7 +51,8 @@ def controller_key(controller: Spec) -> str:
 def check_controller(log: VerifiedLog, controller: Spec) -> None:
     """SpecError unless the declared controller flew this robot (its spec's robot file, camera
     frame and bus inertia are the log's) at the log's step, to the resolution the time base
-    was checked to (the step from N stamps each within r: within 2r/(N − 1))."""
+    was checked to (the step from the end stamps, each within its resolution r and the
+    jitter allowed J·dt: within 2(r + J·dt)/(N − 1))."""
     if (file_digest(controller.robot_path) != log.meta.robot_hash
             or controller.robot.camera_frame != log.spec.robot.camera_frame
             or controller.robot.bus_inertia_scale != log.spec.robot.bus_inertia_scale):
@@ -61,7 +62,7 @@ def check_controller(log: VerifiedLog, controller: Spec) -> None:
                         f"log's ({log.meta.robot_file}): not the loop that flew it")
     dt = log.spec.mission.dt
     time = log.meta.imported.get("time", {})
-    res = float(time.get("resolution") or 0.0)
+    res = float(time.get("resolution") or 0.0) + float(time.get("jitter_bound") or 0.0) * dt
     tol = max(2 * res / max(log.rows - 1, 1), 4 * np.finfo(float).eps * dt)
     if abs(controller.mission.dt - dt) > tol:
         raise SpecError(f"--controller {controller.name}: field mission.dt: "

@@ -24,6 +24,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.bounded_read import read_at_most
 from pipeline.budget import Budget
 from pipeline.errors import SpecError
 from pipeline.importer.mapping import TIME_UNITS, ImportMapping
@@ -46,6 +47,11 @@ class SourceBytes:
     sha256: str
 
 
+# A source that is not a regular file (a pipe, a device) has no size to judge before it is
+# read: it is read up to this many bytes, then refused (a log that large is saved to a file).
+STREAM_MAX_BYTES = 256 << 20
+
+
 def read_bytes(source: Path) -> SourceBytes:
     """The file's bytes and their SHA-256, refused when they alone would not fit the memory
     budget: before they are read (a regular file, by its size) or as soon as they pass it (a
@@ -54,15 +60,22 @@ def read_bytes(source: Path) -> SourceBytes:
     try:
         with open(source, "rb") as fh:
             st = os.fstat(fh.fileno())
-            if stat.S_ISREG(st.st_mode) and st.st_size > limit:
+            regular = stat.S_ISREG(st.st_mode)
+            if regular and st.st_size > limit:
                 check_size(source, st.st_size, copies=1)
-            data = fh.read(limit + 1)
+            # In chunks, so only what is there is held: a regular file up to the budget, a
+            # stream or a device (a FIFO, /dev/zero) up to STREAM_MAX_BYTES as well.
+            data = read_at_most(fh, limit if regular else min(STREAM_MAX_BYTES, limit))
     except IsADirectoryError:
         raise SpecError(f"{source}: a folder, not a log file (a ROS 2 bag's folder is "
                         f"--format rosbag)") from None
     except OSError as exc:
         raise SpecError(f"{source}: cannot read: {exc.strerror or exc}") from None
     check_size(source, len(data), copies=1)
+    if not regular and len(data) > STREAM_MAX_BYTES:
+        raise SpecError(f"{source}: not a regular file (a pipe or a device) and more than "
+                        f"{STREAM_MAX_BYTES >> 20} MiB of it; save it to a file and import "
+                        "that")
     return SourceBytes(source, data, hashlib.sha256(data).hexdigest())
 
 

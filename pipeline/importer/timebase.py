@@ -51,8 +51,10 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str,
     t_0 + k·dt (dt is drawn from those two), and 2·``jitter``·dt more (a telemetry's stamps,
     each published late or early by up to jitter·dt, the line through the end stamps too: one
     row per step still, analysed at its own instants). A step over GAP_STEPS·dt (rows
-    missing) or under dt/GAP_STEPS (a row too many) is refused whatever the resolution: with
-    jitter below MAX_JITTER a step of one row lies within (1 ± 2·jitter)·dt, apart from both."""
+    missing) or under the shortest a jittered step may be (a row too many) is refused
+    whatever the resolution: a step of one row lies within (1 ± 2·jitter)·dt, the short bound
+    dt/GAP_STEPS, or (1 − 2·jitter)·dt when the jitter allows shorter (above a sixth of a
+    step); a row too many is also far off the line of the others (its deviation check)."""
     if not 0.0 <= jitter < MAX_JITTER:
         raise SpecError(f"--max-jitter {jitter:g}: a fraction of the step in [0, {MAX_JITTER:g})"
                         f": beyond it a jittered step cannot be told from a dropped row")
@@ -76,7 +78,8 @@ def even_time_base(t: np.ndarray, resolution: float | np.ndarray, what: str,
     worst = float(dev.max())
     gap = steps / dt
     slack = (res[1:] + res[:-1]) / dt  # a step is known to its two stamps' resolutions
-    odd = np.flatnonzero((gap > GAP_STEPS + slack) | (gap < 1 / GAP_STEPS - slack))
+    shortest = min(1 / GAP_STEPS, 1 - 2 * jitter)
+    odd = np.flatnonzero((gap > GAP_STEPS + slack) | (gap < shortest - slack))
     if odd.size or np.any(dev > tol):
         k = int(np.argmax(dev > tol))
         if odd.size:

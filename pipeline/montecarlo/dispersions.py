@@ -46,7 +46,9 @@ class Dispersion(BaseModel):
     half_width: NonNegative | list[NonNegative] | None = None
     low: Finite | None = None
     high: Finite | None = None
-    truncate: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    # At least a tenth of a standard deviation: ε is drawn by rejection, and below it the
+    # draws a sample needs grow without bound (1e-300 never ends).
+    truncate: Annotated[float, Field(ge=0.1, allow_inf_nan=False)] | None = None
     values: list[Finite] | None = None
     axes_deg: NonNegative | None = None  # a body's inertia only
 

@@ -109,6 +109,8 @@ def montecarlo_command(args: argparse.Namespace) -> int:
     if args.sample is not None:
         return run_one(args)
     mc = plan_montecarlo(args.file, args.samples)
+    from pipeline.budget import check_study_time
+    from pipeline.montecarlo.owner import claim_folders
     from pipeline.montecarlo.task import cached_record
     from pipeline.montecarlo.verdict import (
         TABLE_NAME,
@@ -118,7 +120,13 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         verdict_json,
     )
     from pipeline.provenance.keys import sample_version
-    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
+    from pipeline.sweep.cluster import (
+        WORKER_TIMEOUT,
+        ClusterOptions,
+        check_workers,
+        open_client,
+        scheduler_address,
+    )
     from pipeline.sweep.driver import _raise_stop, _Stop, check_writable
     from pipeline.sweep.results import write_table
 
@@ -130,6 +138,9 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
         slurm_log_dir=root.parent / ".slurm",
         worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
+    check_workers(options, scheduler_address(options.scheduler))
+    check_study_time(mc.seconds, len(mc.samples), args.workers, f"montecarlo {mc.name}")
+    claim_folders("montecarlo", mc.name, mc.path, (root, out), args.force)
     t0 = time.perf_counter()
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -174,11 +185,13 @@ def run_one(args: argparse.Namespace) -> int:
     from pipeline.montecarlo.plan import draw_one
 
     mc, s = draw_one(args.file, args.sample)
+    from pipeline.montecarlo.owner import claim_folders
     from pipeline.montecarlo.sample import judge_columns, log_digest
     from pipeline.montecarlo.task import cached_record, damaged
     from pipeline.store.door import ArtefactStore
 
     root = Path(args.logs).resolve() / mc.name
+    claim_folders("montecarlo", mc.name, mc.path, (root,), args.force)
     store = ArtefactStore(root)
     run = store.run(s.spec, expect=None)
     cols = run.log.columns(run.log.column_names())

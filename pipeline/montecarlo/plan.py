@@ -31,10 +31,11 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.analysis.confidence import samples_needed
+from pipeline.budget import Budget, check_mission, check_samples
 from pipeline.errors import SpecError
 from pipeline.montecarlo.dispersions import Dispersion, draw_inertia, draw_value
 from pipeline.paths import SHIPPED_SPECS
-from pipeline.spec import INERTIAL_BODIES, Spec, load_spec, with_overrides
+from pipeline.spec import INERTIAL_BODIES, Seed, Spec, load_spec, with_overrides
 from pipeline.yamlfile import read_yaml
 
 Probability = Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)]
@@ -56,7 +57,7 @@ class MonteCarloFile(BaseModel):
     description: str = ""
     mission: str
     set: dict[str, Any] = Field(default_factory=dict)
-    seed: int
+    seed: Seed
     target: Target = Target()
     samples: Annotated[int, Field(gt=0)] | None = None
     ripple_max: Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -81,6 +82,7 @@ class MonteCarlo:
     config: MonteCarloFile
     base: Spec
     samples: list[Sample]
+    seconds: float = 0.0  # the samples' flights by the budget's estimate (pipeline.budget)
 
     @property
     def target(self) -> Target:
@@ -277,10 +279,15 @@ def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
                         "body.<bus|payload>.<mass|com|inertia>")
     nominals = body_nominals(base, bodies, path)
     n = samples or file_samples(config)
+    check_samples(n, f"{path}: field {'samples' if config.samples else 'target'}"
+                  if samples is None else f"--samples {samples}")
     name = path.stem
     indices = range(n) if only is None else [only]
     # The nominals are the fixed overrides' (a block the file sets, as mission.plant.timing,
     # can then be dispersed).
     fixed = with_overrides(base, config.set) if config.set else base
     drawn = [draw_sample(name, config, fixed, i, nominals, path) for i in indices]
-    return MonteCarlo(name, path, config, base, drawn)
+    budget = Budget.from_environment()  # each sample's mission within it, as `run` judges
+    seconds = sum(check_mission(s.spec, budget, f"{path}: sample {s.index}").seconds
+                  for s in drawn)
+    return MonteCarlo(name, path, config, base, drawn, seconds)

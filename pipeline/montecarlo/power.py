@@ -38,10 +38,11 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.atomic_files import atomic_write_text
+from pipeline.budget import Budget, check_mission, check_samples, check_study_time
 from pipeline.errors import LogError, RunFailed, SpecError
 from pipeline.montecarlo.plan import resolve_montecarlo
 from pipeline.montecarlo.sealed import sealed_json, unseal
-from pipeline.spec import Sensors, Spec, load_spec, with_overrides
+from pipeline.spec import Seed, Sensors, Spec, load_spec, with_overrides
 from pipeline.yamlfile import read_yaml
 
 if TYPE_CHECKING:  # pandas, Dask and the simulator where a study runs, not to check its file
@@ -61,7 +62,7 @@ class PowerFile(BaseModel):
     ripple: str
     quiet: str
     set: dict[str, Any] = Field(default_factory=dict)
-    seed: int
+    seed: Seed
     samples: Annotated[int, Field(gt=0)]
     noise: str
     levels: Annotated[list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
@@ -84,6 +85,7 @@ class PowerPlan:
     path: Path
     config: PowerFile
     samples: list[PowerSample]
+    seconds: float = 0.0  # the runs' flights by the budget's estimate (pipeline.budget)
 
 
 def read_power_file(path: Path) -> PowerFile:
@@ -115,8 +117,12 @@ def plan_power(ref: str | Path, samples: int | None = None) -> PowerPlan:
     if sorted(config.levels) != list(config.levels) or len(set(config.levels)) < len(
             config.levels):
         raise SpecError(f"{path}: field levels: give them increasing, each once")
+    check_samples(len(CASES) * len(config.levels) * config.samples,
+                  f"{path}: field samples" if samples is None else f"--samples {samples}")
     here = path.resolve().parent
     bases = {case: load_spec(getattr(config, case), here) for case in CASES}
+    budget = Budget.from_environment()
+    seconds = 0.0
     samples = []
     for case in CASES:
         for j, level in enumerate(config.levels):
@@ -129,8 +135,9 @@ def plan_power(ref: str | Path, samples: int | None = None) -> PowerPlan:
                                                         "mission.plant.sensors": sensors}, name)
                 except SpecError as exc:
                     raise SpecError(f"{path}: {case} mission {bases[case].name}: {exc}") from None
+                seconds += check_mission(spec, budget, f"{path}: {case} run {name}").seconds
                 samples.append(PowerSample(name, case, j, i, spec))
-    return PowerPlan(path.stem, path, config, samples)
+    return PowerPlan(path.stem, path, config, samples, seconds)
 
 
 def power_file_key(ref: str | Path) -> str:
@@ -314,7 +321,14 @@ def power_command(args: argparse.Namespace) -> int:
     plan = plan_power(args.file, args.samples)
     import pandas as pd
 
-    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
+    from pipeline.montecarlo.owner import claim_folders
+    from pipeline.sweep.cluster import (
+        WORKER_TIMEOUT,
+        ClusterOptions,
+        check_workers,
+        open_client,
+        scheduler_address,
+    )
     from pipeline.sweep.driver import check_writable, execute_tasks
 
     root = Path(args.logs).resolve() / plan.name
@@ -324,6 +338,9 @@ def power_command(args: argparse.Namespace) -> int:
     options = ClusterOptions(scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
                              slurm_log_dir=root.parent / ".slurm",
                              worker_timeout=args.worker_timeout or WORKER_TIMEOUT)
+    check_workers(options, scheduler_address(options.scheduler))
+    check_study_time(plan.seconds, len(plan.samples), args.workers, f"power {plan.name}")
+    claim_folders("power", plan.name, plan.path, (root, out), args.force)
     samples = {s.name: s for s in plan.samples}
     t0 = time.perf_counter()
     with open_client(options) as session:

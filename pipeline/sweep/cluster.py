@@ -194,6 +194,46 @@ def slurm_cluster(log_dir: Path, lifetime: float | None = None, jobs: Jobs | Non
     return SLURMCluster(job_cls=RecordedJob, **slurm_kwargs(log_dir, lifetime))
 
 
+# SLURM workers when the cluster does not say how many CPUs it has (``sinfo``).
+MAX_SLURM_WORKERS = 10_000
+
+
+def check_workers(options: ClusterOptions, address: str | None = None) -> None:
+    """SpecError (one line) for a worker count the cluster cannot give: below 1; above this
+    machine's cores for the embedded cluster (more workers than cores only share them, each
+    with its copy of the libraries); above the SLURM cluster's CPUs (``sinfo``), or
+    ``MAX_SLURM_WORKERS`` where it does not answer. An existing scheduler's workers are its
+    own."""
+    n = options.workers
+    if n < 1:
+        raise SpecError(f"--workers {n}: needs at least 1")
+    if address:
+        return
+    if options.slurm:
+        cpus = slurm_cpus()
+        cap, where = ((cpus, f"the SLURM cluster's {cpus} CPUs (sinfo)") if cpus else
+                      (MAX_SLURM_WORKERS, f"{MAX_SLURM_WORKERS:,}, the most this asks SLURM for"))
+    else:
+        cap = os.cpu_count() or 1
+        where = f"this machine's {cap} cores (the embedded cluster; --slurm or --scheduler " \
+                "for more)"
+    if n > cap:
+        raise SpecError(f"--workers {n}: more than {where}")
+
+
+def slurm_cpus() -> int | None:
+    """The SLURM cluster's CPUs (``sinfo -h -o %C``: allocated/idle/other/total), None when
+    it does not answer."""
+    import subprocess
+
+    try:
+        r = subprocess.run(["sinfo", "-h", "-o", "%C"], capture_output=True, text=True,
+                           timeout=20)
+        return int(r.stdout.split("/")[-1]) if r.returncode == 0 else None
+    except (OSError, subprocess.TimeoutExpired, ValueError):
+        return None
+
+
 def wait_for_workers(client, n: int, timeout: float, what: str, jobs: Jobs | None = None
                      ) -> None:
     """Return once ``n`` workers are connected; SpecError (one line) after ``timeout`` s, or
@@ -221,8 +261,7 @@ def open_client(options: ClusterOptions) -> Iterator[Session]:
 
     t0 = time.perf_counter()
     address = scheduler_address(options.scheduler)
-    if options.workers < 1:
-        raise SpecError(f"--workers {options.workers}: needs at least 1")
+    check_workers(options, address)
     if options.worker_timeout <= 0:
         raise SpecError(f"--worker-timeout {options.worker_timeout:g}: must be positive")
     if address and options.slurm:

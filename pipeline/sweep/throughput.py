@@ -163,6 +163,11 @@ def _timed(setting: str, root: Path, here, on_cluster) -> Throughput:
     if slurm and (why := slurm_ready()):
         return Throughput(setting, 2, skipped=why)
     options = ClusterOptions(workers=2, slurm=slurm, slurm_log_dir=root / "slurm")
+    if slurm:
+        # dask-jobqueue adds its defaults to Dask's config when first imported: imported
+        # inside the set below, they would leave with it, and the next SLURM cluster of this
+        # process would find no jobqueue.slurm.shared-temp-directory.
+        import dask_jobqueue  # noqa: F401
     # the local SLURM: scheduler and workers on the loopback interface
     local = {"jobqueue.slurm.walltime": SLURM_WALLTIME, "jobqueue.slurm.interface": "lo"}
     with dask.config.set(local), \

@@ -1,0 +1,60 @@
+"""Which study file a study's folders belong to (issue 49).
+
+A Monte Carlo's or a power study's outputs are kept under its file's name: the kept records in
+``<logs>/<name>/``, the table and the verdict in ``<out>/<name>/``. Two different files of one
+name (``a/seed.yaml`` and ``b/seed.yaml``, other dispersions) would share them, the second
+silently replacing the first's verdict and records. So each folder names the file that owns
+it (:data:`OWNER_FILE`: the file's resolved path), and a study that would take a folder
+another file owns is refused in one line before anything runs, unless ``--force``, which
+replaces the other's results (as an import of another source under a name in use). The same
+file edited keeps its folders: its results are superseded by their key, as before.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from pipeline.atomic_files import atomic_write_text
+from pipeline.errors import SpecError
+from pipeline.paths import display_path
+
+OWNER_FILE = ".study_file"  # in each of a study's folders: the owning file's resolved path
+# What a study writes in its folders, removed when --force gives them to another file: the
+# kept records (sealed JSON), the tables and the verdicts or results.
+RESULT_PATTERNS = ("*.json", "*.parquet")
+
+
+def owner(folder: Path) -> str | None:
+    """The resolved path of the file that owns ``folder`` (None: no owner recorded)."""
+    try:
+        return (Path(folder) / OWNER_FILE).read_text().strip() or None
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError(f"{display_path(Path(folder) / OWNER_FILE)}: unreadable ({exc})"
+                        ) from None
+
+
+def claim_folders(kind: str, name: str, file: Path, folders: Iterable[Path],
+                  force: bool = False) -> None:
+    """Make ``folders`` the study file ``file``'s: a SpecError (exit 2) naming the folder and
+    its owner when another file owns one, unless ``force``, which removes the other's
+    results there first. Nothing is written before every folder is checked."""
+    me = str(Path(file).resolve())
+    folders = [Path(f) for f in folders]
+    taken = [(f, o) for f in folders if (o := owner(f)) is not None and o != me]
+    if taken and not force:
+        folder, other = taken[0]
+        gone = "" if Path(other).is_file() else " (no longer there)"
+        raise SpecError(f"{kind} {name}: {display_path(folder)} holds the results of another "
+                        f"{kind} file of that name, {other}{gone}; give this file another "
+                        "name, another --logs and --out, or pass --force to replace them")
+    for folder, _ in taken:
+        for pattern in RESULT_PATTERNS:
+            for path in folder.glob(pattern):
+                path.unlink(missing_ok=True)
+    for folder in folders:
+        if owner(folder) != me:
+            folder.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(folder / OWNER_FILE, me + "\n")
