@@ -58,13 +58,14 @@ def run_cli(*args: str | Path, cwd: Path | None = None, timeout: float = 120
                           timeout=timeout, env=env)
 
 
-def run_cli_in_process(*args: str | Path, cwd: Path | None = None
-                       ) -> subprocess.CompletedProcess:
+def run_cli_in_process(*args: str | Path, cwd: Path | None = None,
+                       timeout: float | None = None) -> subprocess.CompletedProcess:
     """``python -m pipeline ARGS`` as :func:`run_cli` returns it, run by ``pipeline.cli.main``
     in this process: for the many cases of one command's bad input, where a fresh
     interpreter (about a second each) would test only the start of Python again. Each
     command keeps a test through :func:`run_cli`. An exception that escapes ``main`` (what
-    would be a traceback) fails the test that called it."""
+    would be a traceback) fails the test that called it. ``timeout``: :func:`run_cli`'s,
+    for the same call; a command in this process is not a child to time out."""
     from pipeline.cli import main
 
     out, err = io.StringIO(), io.StringIO()

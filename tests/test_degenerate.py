@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import run_cli
+from conftest import run_cli_in_process
 
 from pipeline.analysis.ringing import MIN_STEPS, ring
 from pipeline.errors import SpecError
@@ -21,10 +21,10 @@ def test_a_mission_shorter_than_one_step_is_refused():
 def test_a_log_too_short_for_its_window_is_refused_in_one_line_naming_it(tmp_path):
     spec = tmp_path / "two.yaml"
     spec.write_text("extends: short_nominal\nmission: {duration: 0.06}\n")
-    run = run_cli("run", spec, "--out", tmp_path / "logs")
+    run = run_cli_in_process("run", spec, "--out", tmp_path / "logs")
     assert run.returncode == 0, run.stderr
     log = tmp_path / "logs" / "two" / "run.parquet"
-    out = run_cli("analyze", log, "--out", tmp_path / "rep")
+    out = run_cli_in_process("analyze", log, "--out", tmp_path / "rep")
     assert out.returncode == 2
     last = out.stderr.strip().splitlines()
     assert len(last) == 1 and str(log) in last[0] and "fewer than the 3" in last[0]

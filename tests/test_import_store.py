@@ -18,7 +18,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import run_cli
+from conftest import run_cli_in_process
 
 from pipeline.errors import OutputError, SpecError
 from pipeline.importer.mapping import load_mapping
@@ -142,13 +142,13 @@ def test_the_command_says_up_to_date_and_refuses_another_in_one_line(cols, tmp_p
     a = _parquet(tmp_path / "a.parquet", cols)
     b = _parquet(tmp_path / "b.parquet", cols, slice(0, 100))
     base = ["--robot", "short_nominal", "--name", "n", "--out", logs]
-    assert run_cli("import", a, *base).returncode == 0
-    r = run_cli("import", a, *base)
+    assert run_cli_in_process("import", a, *base).returncode == 0
+    r = run_cli_in_process("import", a, *base)
     assert r.returncode == 0 and "up to date" in r.stdout, r.stdout + r.stderr
-    r = run_cli("import", b, *base)
+    r = run_cli_in_process("import", b, *base)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--force" in r.stderr
     assert "Traceback" not in r.stderr
-    r = run_cli("import", b, *base, "--force")
+    r = run_cli_in_process("import", b, *base, "--force")
     assert r.returncode == 0 and "100 rows" in r.stdout, r.stderr
 
 
@@ -191,7 +191,7 @@ def test_no_import_or_run_writes_through_a_link_out_of_its_folder(cols, tmp_path
         import_log(_parquet(tmp_path / "a.parquet", cols), _mapping(), "linked", logs)
     assert list(elsewhere.iterdir()) == []
     (logs / "short_nominal").symlink_to(elsewhere)
-    r = run_cli("run", "short_nominal", "--out", logs)
+    r = run_cli_in_process("run", "short_nominal", "--out", logs)
     assert r.returncode == 2 and "a symbolic link out of" in r.stderr, r.stderr
     assert r.stderr.count("\n") == 1 and list(elsewhere.iterdir()) == []
     # A logs folder that is itself a link (kept on another disk) is fine.

@@ -19,7 +19,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import run_cli
+from conftest import run_cli, run_cli_in_process
 from scipy.spatial.transform import Rotation
 
 from pipeline.analysis.schema import ImportedRecord
@@ -103,7 +103,7 @@ def test_provenance_is_a_check_only_against_the_sources_own_sigma(nominal, short
     pq.write_table(pa.table({"t": cols["t"], "q": list(cols["q"]), "v": list(cols["v"]),
                              "sigma": own * 1.01}), other := tmp_path / "other.parquet")
     done = import_log(other, _mapping(s_min_G="sigma"), "other", tmp_path / "logs")
-    r = run_cli("analyze", done.path, "--out", tmp_path / "rep")
+    r = run_cli_in_process("analyze", done.path, "--out", tmp_path / "rep")
     assert r.returncode == 1 and "provenance: rebuilt σ_min(Γ) differs" in r.stderr, r.stderr
 
 
@@ -454,8 +454,8 @@ def test_an_empty_or_damaged_file_is_refused_as_such(nominal, tmp_path, kind, ne
 
 def test_a_damaged_file_is_one_line_exit_2_from_the_command(nominal, tmp_path):
     cols, _ = nominal
-    r = run_cli("import", _damaged("truncated_npz", cols, tmp_path), "--robot", "short_nominal",
-                "--out", tmp_path / "logs")
+    r = run_cli_in_process("import", _damaged("truncated_npz", cols, tmp_path), "--robot",
+                           "short_nominal", "--out", tmp_path / "logs")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "Traceback" not in r.stderr and "truncated.npz" in r.stderr
 
@@ -757,26 +757,26 @@ def test_the_import_and_analyze_commands(nominal, tmp_path):
     src = _precursor_npz(tmp_path / "states_ur3_1.npz", cols)
     args = ["import", src, "--robot", "short_nominal", "--q", "states.x[:, 0:13]", "--v",
             "states.x[:, 13:25]", "--time", "states.t", "--out", tmp_path / "logs"]
-    r = run_cli(*args)
+    r = run_cli_in_process(*args)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--allow-pickle" in r.stderr
-    r = run_cli(*args, "--allow-pickle")
+    r = run_cli_in_process(*args, "--allow-pickle")
     assert r.returncode == 0, r.stderr
     assert "q and v agree" in r.stdout
     log = tmp_path / "logs" / "imported" / "states_ur3_1" / "run.parquet"
-    r = run_cli("analyze", log, "--out", tmp_path / "rep")
+    r = run_cli_in_process("analyze", log, "--out", tmp_path / "rep")
     assert r.returncode == 0, r.stderr
     assert "imported npz" in r.stdout and "not run: 4 damping modes" in r.stdout
     rec = json.loads((tmp_path / "rep" / "imported" / "states_ur3_1" /
                       "analysis.json").read_text())
     assert rec["origin"]["format"] == "npz" and rec["damping"] is None
-    r = run_cli("import", src, "--allow-pickle", "--q", "states.x[:, 0:13]", "--v",
+    r = run_cli_in_process("import", src, "--allow-pickle", "--q", "states.x[:, 0:13]", "--v",
                 "states.x[:, 13:25]", "--time", "states.t", "--out", tmp_path / "logs")
     assert r.returncode == 2 and "field robot" in r.stderr
     # A log without stamps: --time none and its step.
     bare = tmp_path / "bare.parquet"
     pq.write_table(pa.table({"q": list(cols["q"]), "v": list(cols["v"])}), bare)
-    r = run_cli("import", bare, "--robot", "short_nominal", "--time", "none", "--dt", "0.03",
-                "--out", tmp_path / "logs")
+    r = run_cli_in_process("import", bare, "--robot", "short_nominal", "--time", "none",
+                           "--dt", "0.03", "--out", tmp_path / "logs")
     assert r.returncode == 0, r.stderr
 
 
@@ -805,13 +805,13 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
                                         "threshold": True}]}]}
     path = tmp_path / "claims.yaml"
     path.write_text(json.dumps(register))  # YAML 1.2 reads JSON
-    r = run_cli("claims", "--claims", path, "--out", out, timeout=600)
+    r = run_cli_in_process("claims", "--claims", path, "--out", out, timeout=600)
     assert r.returncode == 0, r.stderr
     data = json.loads((out / "claims.json").read_text())
     assert data["claims"][0]["status"] == "PASS"
     assert data["claims"][0]["provenance"][0]["origin"].startswith("imported parquet")
     assert "**imported parquet" in (out / "CLAIMS.md").read_text()
-    r = run_cli("report", "--out", out, timeout=600)
+    r = run_cli_in_process("report", "--out", out, timeout=600)
     assert r.returncode == 0, r.stderr
     index = (out / "index.html").read_text()
     assert "Imported logs" in index and "imported parquet" in index
@@ -825,7 +825,7 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     assert f"<code>{meta.robot_file}</code> ({meta.robot_hash[:8]}…)" in index
     # The log deleted: the report is not "up to date"; the page and the index flag it.
     (logs / "imported" / "flight" / "run.parquet").unlink()
-    r = run_cli("report", "--out", out, timeout=600)
+    r = run_cli_in_process("report", "--out", out, timeout=600)
     assert r.returncode == 0 and "up to date" not in r.stderr, r.stderr
     page = (out / "imported" / "flight" / "imported.md").read_text()
     assert "**Its log is gone, damaged or not the one analysed**" in page
@@ -833,11 +833,11 @@ def test_claims_and_reports_accept_an_imported_log_by_name(nominal, tmp_path):
     # A spec or log path of an imported run is refused when the register is loaded.
     register["claims"][0]["checks"][0]["metric"] = "flight:spec.mission.dt"
     path.write_text(json.dumps(register))
-    r = run_cli("claims", "--claims", path, "--out", out)
+    r = run_cli_in_process("claims", "--claims", path, "--out", out)
     assert r.returncode == 2 and "flight is an imported log" in r.stderr
     register["runs"]["flight"]["against"] = "flight"
     path.write_text(json.dumps(register))
-    r = run_cli("claims", "--claims", path, "--out", out)
+    r = run_cli_in_process("claims", "--claims", path, "--out", out)
     assert r.returncode == 2 and "an imported log is analysed alone" in r.stderr
 
 
@@ -851,7 +851,7 @@ def test_the_docs_example_register_runs_as_written(nominal, tmp_path):
     (tmp_path / "claims.yaml").write_text(block)
     import_log(_written(tmp_path, cols["q"], cols["v"], cols["t"]), _mapping(), "flight",
                tmp_path / "logs")
-    r = run_cli("claims", "--claims", "claims.yaml", cwd=tmp_path, timeout=600)
+    r = run_cli_in_process("claims", "--claims", "claims.yaml", cwd=tmp_path, timeout=600)
     assert r.returncode == 0, r.stderr
     assert re.search(r"F1 PASS", r.stdout), r.stdout
 
@@ -991,7 +991,7 @@ def test_a_bad_robot_is_refused_before_the_log_is_read_in_one_line(tmp_path):
     process's stderr) is inside that one line, not around it."""
     (tmp_path / "broken.urdf").write_text('<robot name="x"><link name="a"/>\n')
     (tmp_path / "bad.yaml").write_text("extends: short_nominal\nrobot: {file: broken.urdf}\n")
-    r = run_cli("import", tmp_path / "missing.parquet", "--robot", tmp_path / "bad.yaml",
+    r = run_cli_in_process("import", tmp_path / "missing.parquet", "--robot", tmp_path / "bad.yaml",
                 "--out", tmp_path / "logs")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "broken.urdf: not a loadable robot file" in r.stderr

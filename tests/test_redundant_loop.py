@@ -15,7 +15,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_cli
+from conftest import run_cli_in_process
 
 from pipeline.errors import SpecError
 from pipeline.sim.mission import Mission
@@ -33,7 +33,7 @@ def _lag1_of_differences(x: np.ndarray) -> float:
 
 
 def test_validate_names_the_null_space_mode():
-    r = run_cli("validate", SPEC)
+    r = run_cli_in_process("validate", SPEC)
     assert r.returncode == 0, r.stderr
     modes = next(ln for ln in r.stdout.splitlines() if "damping modes at the start" in ln)
     listed = modes.split("fastest first: ")[1]
@@ -98,14 +98,14 @@ def test_the_flown_map_predicts_the_ripple_and_its_mode(tmp_path, overrides, axi
 
 def test_a_redundant_arms_log_reads_by_joint_name_and_analyzes_with_its_null_space_mode(
         tmp_path):
-    r = run_cli("run", SPEC, "--out", str(tmp_path))
+    r = run_cli_in_process("run", SPEC, "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     path = tmp_path / SPEC / "run.parquet"
     t = read_log_table(path)
     assert [c for c in t.columns if c.startswith("q.panda")] == [
         f"q.panda_joint{i}" for i in range(1, 8)]
     assert {"v_breve.null_space.0", "sat_null_space_acc", "sat_null_space_rate"} <= set(t.columns)
-    a = run_cli("analyze", str(path), "--out", str(tmp_path / "out"))
+    a = run_cli_in_process("analyze", str(path), "--out", str(tmp_path / "out"))
     assert a.returncode == 0, a.stderr
     record = json.loads((tmp_path / "out" / SPEC / "analysis.json").read_text())
     th = record["theory"]
@@ -136,10 +136,10 @@ def test_the_analysis_verdict_on_the_rippling_panda(tmp_path):
     """analyze on the Panda past the camera roll's bound (short_panda_dt015): the verdict
     predicts the camera roll's period-2 ring from the map of that run and finds it in the
     data, the null-space mode predicted and measured quiet, theory and data agreeing."""
-    r = run_cli("run", "short_panda_dt015", "--out", str(tmp_path))
+    r = run_cli_in_process("run", "short_panda_dt015", "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     path = tmp_path / "short_panda_dt015" / "run.parquet"
-    a = run_cli("analyze", str(path), "--out", str(tmp_path / "out"))
+    a = run_cli_in_process("analyze", str(path), "--out", str(tmp_path / "out"))
     assert a.returncode == 0, a.stderr
     record = json.loads((tmp_path / "out" / "short_panda_dt015" / "analysis.json").read_text())
     assert record["theory"]["spectral_radius"] > 1.0
@@ -165,7 +165,7 @@ def test_a_redundant_arms_log_imported_from_t_q_v_gives_the_same_data_stages(tmp
     from pipeline.logs import verify_log
     from pipeline.store.door import ArtefactStore, import_log
 
-    r = run_cli("run", SPEC, "--out", str(tmp_path / "sim"))
+    r = run_cli_in_process("run", SPEC, "--out", str(tmp_path / "sim"))
     assert r.returncode == 0, r.stderr
     log = verify_log(tmp_path / "sim" / SPEC / "run.parquet")
     original = analyze_log(log)

@@ -41,6 +41,7 @@ def _file(tmp_path: Path, duration=0.1, seed=7, samples="samples: 2\n", p=0.9, t
     ({"duration": 1.0e6}, [], "field mission.duration"),
     ({}, ["--workers", "1000"], "--workers 1000: more than this machine's"),
     ({}, ["--workers", "0"], "--workers 0"),
+    ({}, ["--scheduler", "not an address"], "not a scheduler address"),
 ])
 def test_a_bad_count_is_one_line_before_any_work(tmp_path, fields, extra, needle):
     path = _file(tmp_path, **fields)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from conftest import run_cli, run_cli_in_process
 
 from pipeline.errors import SpecError
 from pipeline.montecarlo.owner import claim_folders, owner
@@ -101,3 +101,13 @@ def test_a_power_study_of_a_name_in_use_is_refused(tmp_path):
                 "--logs", tmp_path / "logs", "--out", tmp_path / "out")
     assert r.returncode == 2, r.stderr
     assert "holds the results of another power file" in r.stderr
+
+
+def test_a_records_path_that_is_a_folder_is_refused_before_any_flight(tmp_path):
+    path = _file(tmp_path / "a")
+    (tmp_path / "logs" / "seed" / "seed__00000.json").mkdir(parents=True)
+    r = run_cli_in_process("montecarlo", path, "--workers", "1", "--logs", tmp_path / "logs",
+                           "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    assert "seed__00000.json: not a file" in r.stderr and len(r.stderr.splitlines()) == 1
+    assert not (tmp_path / "out").exists()

@@ -36,6 +36,10 @@ def _stamp(msg) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
+# The mapping's fields that name a file's columns, which a bag does not have.
+COLUMN_FIELDS = ("time", "q", "v", "s_min_G", "allow_pickle")
+
+
 def read_bag(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) -> RawLog:
     """t, q and v of the mapping's two topics; ``joints``: the robot's arm joints in order."""
     from rosbags.highlevel import AnyReader
@@ -44,6 +48,11 @@ def read_bag(source: Path, mapping: ImportMapping, fmt: str, joints: list[str]) 
     if mapping.topics is None:
         raise SpecError(f"{source}: field topics: a {fmt} log needs its odometry and joints "
                         f"topics (topics: {{odometry: /bus/odom, joints: /arm/joint_states}})")
+    # Given, they would be recorded in the log's mapping as if they had been read.
+    ignored = [f for f in COLUMN_FIELDS if f in mapping.model_fields_set]
+    if ignored:
+        raise SpecError(f"{source}: field {ignored[0]}: a {fmt} log's t, q and v come from "
+                        f"its topics' messages, not from columns: leave {ignored[0]} out")
     tp = mapping.topics
     want = {tp.odometry: ODOMETRY, tp.joints: JOINT_STATE}
     if tp.imu is not None:

@@ -15,6 +15,7 @@ import os
 import re
 import stat
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -90,17 +91,24 @@ class RawLog:
     s_min_G: np.ndarray | None = None  # N: the source's own σ_min(Γ), where it logged one
 
 
-def float_resolution(t: np.ndarray, accumulated: bool = True) -> np.ndarray:
-    """How far float64 stamps t_k may lie from t_0 + k·dt though written from it, per row: two
-    ulps of the largest stamp (its own rounding and that of t_0 + k·dt), and for stamps that
-    may have been summed step by step (t += dt; not integer ticks) k + 1 roundings of at most
-    an ulp of the time elapsed (t_k − t_0: a sum started at an epoch keeps its offset)."""
+def float_resolution(t: np.ndarray, accumulated: bool = True,
+                     written: np.dtype | type = np.float64) -> np.ndarray:
+    """How far stamps t_k written as floats of type ``written`` may lie from t_0 + k·dt
+    though written from it, per row: two ulps of the largest stamp (its own rounding and that
+    of t_0 + k·dt), and for stamps that may have been summed step by step (t += dt; not
+    integer ticks) k + 1 roundings of at most an ulp of the time elapsed (t_k − t_0: a sum
+    started at an epoch keeps its offset). The ulps are ``written``'s (float32's are 2²⁹
+    float64's)."""
     if not len(t):
         return np.zeros(0)
-    base = 2 * float(np.spacing(np.max(np.abs(t))))
+
+    def ulp(x: float) -> float:
+        return float(np.spacing(np.asarray(x, dtype=written)))
+
+    base = 2 * ulp(float(np.max(np.abs(t))))
     if not accumulated:
         return np.full(len(t), base)
-    return base + (np.arange(len(t)) + 1) * float(np.spacing(np.max(np.abs(t - t[0]))))
+    return base + (np.arange(len(t)) + 1) * ulp(float(np.max(np.abs(t - t[0]))))
 
 
 _DECIMAL = re.compile(r"^[+-]?(\d*)(?:\.(\d*))?(?:[eE]([+-]?\d+))?$")
@@ -167,7 +175,11 @@ def _vector(source: Path, field: str, spec: str | list[str], width: int, get,
                                                            positional)[1], width)
     if len(spec) != width:
         raise SpecError(f"{source}: field {field}: {len(spec)} columns named, {width} needed")
-    return _matrix(source, field, np.column_stack([np.asarray(get(c), dtype=float)
+    twice = [c for i, c in enumerate(spec) if c in spec[:i]]
+    if twice:
+        raise SpecError(f"{source}: field {field}: column {twice[0]!r} named twice (each of "
+                        f"the {width} components is its own column)")
+    return _matrix(source, field, np.column_stack([_real_numbers(source, c, get(c))
                                                    for c in spec]), width)
 
 
@@ -270,6 +282,18 @@ def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
     return col.to_numpy()
 
 
+def _arrow_numbers(source: Path, name: str, typ: pa.DataType) -> None:
+    """SpecError unless a binary column holds numbers (integers or floats, or lists of them):
+    text is not parsed, booleans are not 0 and 1."""
+    inner = typ
+    while pa.types.is_list(inner) or pa.types.is_fixed_size_list(inner) \
+            or pa.types.is_large_list(inner):
+        inner = inner.value_type
+    if not (pa.types.is_integer(inner) or pa.types.is_floating(inner)):
+        raise SpecError(f"{source}: column {name!r}: {inner} values, not numbers (a binary "
+                        f"format's numbers are written as numbers)")
+
+
 def read_parquet(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) -> RawLog:
     source = src.path
     try:
@@ -287,6 +311,7 @@ def read_parquet(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) ->
         if name not in table.column_names:
             raise SpecError(f"{source}: no column {name!r} (columns: "
                             f"{', '.join(table.column_names[:20])})")
+        _arrow_numbers(source, name, table.schema.field(name).type)
         try:
             return _numpy_column(table.column(name))
         except (ValueError, TypeError):  # a list of another length, or a null, in a row
@@ -326,6 +351,9 @@ def _stamps(source: Path, mapping: ImportMapping, get, positional=None
         t = _finite_stamps(source, mapping.time, raw.astype(float) * scale)
     except (TypeError, ValueError):
         raise SpecError(f"{source}: time ({mapping.time}): not numbers") from None
+    if raw.dtype.kind == "f" and raw.dtype.itemsize < 8:  # written coarser than float64
+        return t, (float_resolution(raw.astype(float), written=raw.dtype) * scale
+                   + float_resolution(t))
     return t, float_resolution(t)
 
 
@@ -384,6 +412,10 @@ def read_npz(src: SourceBytes, mapping: ImportMapping, shape: RobotShape) -> Raw
             if key not in cache:
                 try:
                     cache[key] = archive[key]
+                except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
+                    why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                    raise SpecError(f"{source}: key {key!r}: a damaged member of the archive "
+                                    f"({why})") from None
                 except ValueError:  # an object array: numpy refuses it without pickles
                     raise SpecError(f"{source}: key {key!r} holds a pickled object; loading a "
                                     f"pickle runs code from the file: give --allow-pickle "

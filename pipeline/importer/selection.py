@@ -85,7 +85,11 @@ def select(source: Path, field: str, text: str, get: Callable[[str], Any],
         if positional is None:
             raise SpecError(f"{source}: field {field}: {text!r}: this format has no columns "
                             f"by position: name a key")
-        return s, positional(s.cols)
+        try:
+            return s, positional(s.cols)
+        except IndexError:
+            raise SpecError(f"{source}: field {field}: {text!r}: column {s.cols} is past the "
+                            f"file's columns") from None
     value = get(s.path)
     if s.cols is None:
         return s, value

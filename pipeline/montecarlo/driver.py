@@ -110,7 +110,7 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         return run_one(args)
     mc = plan_montecarlo(args.file, args.samples)
     from pipeline.budget import check_study_time
-    from pipeline.montecarlo.owner import claim_folders
+    from pipeline.montecarlo.owner import check_owners, check_record_paths, claim_folders
     from pipeline.montecarlo.task import cached_record
     from pipeline.montecarlo.verdict import (
         TABLE_NAME,
@@ -140,11 +140,14 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
     check_workers(options, scheduler_address(options.scheduler))
     check_study_time(mc.seconds, len(mc.samples), args.workers, f"montecarlo {mc.name}")
-    claim_folders("montecarlo", mc.name, mc.path, (root, out), args.force)
+    check_record_paths("montecarlo", mc.name, root, [s.spec.name for s in mc.samples])
+    check_owners("montecarlo", mc.name, mc.path, (root, out), args.force)
     t0 = time.perf_counter()
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with open_client(options) as session:
+            # Claimed once the cluster answers: a bad --scheduler leaves no folder behind.
+            claim_folders("montecarlo", mc.name, mc.path, (root, out), args.force)
             records = run_montecarlo(mc, root, session.client, sys.stderr.isatty(),
                                      options.worker_timeout, session.jobs)
     except _Stop as stop:

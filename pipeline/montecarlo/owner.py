@@ -25,6 +25,17 @@ OWNER_FILE = ".study_file"  # in each of a study's folders: the owning file's re
 RESULT_PATTERNS = ("*.json", "*.parquet")
 
 
+def check_record_paths(kind: str, name: str, root: Path, samples: Iterable[str]) -> None:
+    """SpecError naming the first of the samples' kept-record paths under ``root`` that is
+    there but is not a file (a folder, a device): a record could not be kept there, and every
+    flight into it would be lost."""
+    for sample in samples:
+        path = Path(root) / f"{sample}.json"
+        if path.exists() and not path.is_file():
+            raise SpecError(f"{kind} {name}: {display_path(path)}: not a file, where the "
+                            "sample's record is kept; move it away")
+
+
 def owner(folder: Path) -> str | None:
     """The resolved path of the file that owns ``folder`` (None: no owner recorded)."""
     try:
@@ -36,20 +47,30 @@ def owner(folder: Path) -> str | None:
                         ) from None
 
 
-def claim_folders(kind: str, name: str, file: Path, folders: Iterable[Path],
-                  force: bool = False) -> None:
-    """Make ``folders`` the study file ``file``'s: a SpecError (exit 2) naming the folder and
-    its owner when another file owns one, unless ``force``, which removes the other's
-    results there first. Nothing is written before every folder is checked."""
+def check_owners(kind: str, name: str, file: Path, folders: Iterable[Path],
+                 force: bool = False) -> list[tuple[Path, str]]:
+    """The folders another file owns, with their owners; a SpecError (exit 2) naming the
+    first and its owner unless ``force``. Reads only: a command checks this before it starts
+    anything, and claims the folders (:func:`claim_folders`) once it can run."""
     me = str(Path(file).resolve())
-    folders = [Path(f) for f in folders]
-    taken = [(f, o) for f in folders if (o := owner(f)) is not None and o != me]
+    taken = [(f, o) for f in map(Path, folders) if (o := owner(f)) is not None and o != me]
     if taken and not force:
         folder, other = taken[0]
         gone = "" if Path(other).is_file() else " (no longer there)"
         raise SpecError(f"{kind} {name}: {display_path(folder)} holds the results of another "
                         f"{kind} file of that name, {other}{gone}; give this file another "
                         "name, another --logs and --out, or pass --force to replace them")
+    return taken
+
+
+def claim_folders(kind: str, name: str, file: Path, folders: Iterable[Path],
+                  force: bool = False) -> None:
+    """Make ``folders`` the study file ``file``'s (:func:`check_owners` first); ``force``
+    removes another file's results there first. Nothing is written before every folder is
+    checked."""
+    me = str(Path(file).resolve())
+    folders = [Path(f) for f in folders]
+    taken = check_owners(kind, name, file, folders, force)
     for folder, _ in taken:
         for pattern in RESULT_PATTERNS:
             for path in folder.glob(pattern):

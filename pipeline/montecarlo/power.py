@@ -321,7 +321,7 @@ def power_command(args: argparse.Namespace) -> int:
     plan = plan_power(args.file, args.samples)
     import pandas as pd
 
-    from pipeline.montecarlo.owner import claim_folders
+    from pipeline.montecarlo.owner import check_owners, check_record_paths, claim_folders
     from pipeline.sweep.cluster import (
         WORKER_TIMEOUT,
         ClusterOptions,
@@ -340,11 +340,14 @@ def power_command(args: argparse.Namespace) -> int:
                              worker_timeout=args.worker_timeout or WORKER_TIMEOUT)
     check_workers(options, scheduler_address(options.scheduler))
     check_study_time(plan.seconds, len(plan.samples), args.workers, f"power {plan.name}")
-    claim_folders("power", plan.name, plan.path, (root, out), args.force)
+    check_record_paths("power", plan.name, root, [s.name for s in plan.samples])
+    check_owners("power", plan.name, plan.path, (root, out), args.force)
     samples = {s.name: s for s in plan.samples}
     t0 = time.perf_counter()
     with open_client(options) as session:
         client = session.client
+        # Claimed once the cluster answers: a bad --scheduler leaves no folder behind.
+        claim_folders("power", plan.name, plan.path, (root, out), args.force)
 
         def submit(name: str, topic: str, key: str):
             s = samples[name]

@@ -79,7 +79,16 @@ def scheduler_address(option: str | None) -> str | None:
 def connect(address: str, timeout: float = CONNECT_TIMEOUT):
     """A Client on an existing scheduler, or a one-line SpecError within ``timeout``."""
     from distributed import Client
+    from distributed.comm import get_address_host_port
 
+    try:
+        # A malformed address is refused before a Client is made: a Client that fails to
+        # start leaves a half-made object whose __del__ waits 10 s at exit, then prints a
+        # traceback after the one-line error.
+        get_address_host_port(address)
+    except ValueError as exc:
+        raise SpecError(f"--scheduler {address}: not a scheduler address such as "
+                        f"tcp://10.0.0.5:8786 ({exc})") from None
     try:
         return Client(address, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError, ValueError, TypeError) as exc:
