@@ -1,15 +1,19 @@
-"""Issue 36's fault and bad-input suite: the importer, imported artefacts, the plant's fields,
-degenerate data and faults, each case through the command line as a user meets it.
+"""The fault and bad-input suite (issues 36 and 49): the importer, imported and simulated
+artefacts, the plant's fields, the studies' counts and seeds, degenerate data and faults, each
+case through the command line as a user meets it.
 
 Run from the repository: ``.venv/bin/python scripts/fault_suite.py [--keep DIR]``. It runs the
-short nominal mission into a scratch folder, builds every case from that log, runs each
-command and prints one line per case and the totals: cases tried, refused cleanly (the
-expected exit code, the last line on stderr the one error naming the file or field, the
-lines before it only a stage's progress, no traceback), accepted
-rightly (exit 0 and the data checked against the source), tracebacks, wrong answers (a
-refusal where an acceptance was due or the reverse, or accepted data that differ), data lost
-(a log that was there before a refused command and is not, or changed). Exit 1 if any case
-is not as expected.
+short nominal mission into a scratch folder, builds every case from that log, and runs every
+case twice: as it is, and under an address-space limit of a quarter of the RAM (``ulimit
+-v``, as cluster nodes set it). Each command runs under a wall-time cap (``WALL_CAP_S``) and a
+memory cap on its process tree (``RSS_CAP``): one that passes either is killed and counted as
+a runaway. One line per case and pass, then the totals per pass: cases tried, refused
+cleanly (the expected exit code, the last line on stderr the one error naming the file or
+field, the lines before it only a stage's progress or argparse's usage, no traceback),
+accepted rightly (exit 0 and the data checked against the source), tracebacks, wrong answers
+(a refusal where an acceptance was due or the reverse, or accepted data that differ),
+runaways, data lost (a file that was there before a refused command and is not, or
+changed). Exit 1 if any case is not as expected.
 """
 
 from __future__ import annotations
@@ -18,11 +22,13 @@ import argparse
 import hashlib
 import json
 import os
+import resource
 import shutil
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,10 +42,69 @@ import pyarrow.parquet as pq
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def cli(*args, cwd: Path | None = None, stdin: bytes | None = None,
-        timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline", *map(str, args)], cwd=cwd or ROOT,
-                          input=stdin, capture_output=True, timeout=timeout)
+WALL_CAP_S = 180.0  # a command still running after this is a runaway
+RSS_CAP = 4 * 2**30  # bytes: a command tree holding more is a runaway
+RUNAWAY = -1000  # the exit code the runner gives a command it killed as a runaway
+# The address-space limit of the current pass (None: none), set by main().
+AS_LIMIT: int | None = None
+
+
+def _tree_rss(p: psutil.Process) -> int:
+    total = 0
+    for proc in [p, *p.children(recursive=True)]:
+        try:
+            total += proc.memory_info().rss
+        except psutil.Error:
+            pass
+    return total
+
+
+def _kill_tree(p: psutil.Process) -> None:
+    for proc in [*p.children(recursive=True), p]:
+        try:
+            proc.kill()
+        except psutil.Error:
+            pass
+
+
+def run_capped(cmd: list[str], cwd: Path | None = None, stdin: bytes | None = None
+               ) -> subprocess.CompletedProcess:
+    """``cmd`` under the pass's address-space limit, killed with its children as a runaway
+    (exit ``RUNAWAY``, stderr saying why) past ``WALL_CAP_S`` or ``RSS_CAP``."""
+    def limit() -> None:
+        if AS_LIMIT is not None:
+            resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT, AS_LIMIT))
+
+    proc = subprocess.Popen(cmd, cwd=cwd or ROOT, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=limit)
+    me, why = psutil.Process(proc.pid), []
+
+    def watch() -> None:
+        while proc.poll() is None:
+            rss = _tree_rss(me)
+            if rss > RSS_CAP:
+                why.append(f"RUNAWAY: {rss / 2**30:.1f} GiB held (cap {RSS_CAP / 2**30:.0f})")
+                _kill_tree(me)
+                return
+            time.sleep(0.1)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        out, err = proc.communicate(stdin, timeout=WALL_CAP_S)
+    except subprocess.TimeoutExpired:
+        why.append(f"RUNAWAY: still running after {WALL_CAP_S:.0f} s")
+        _kill_tree(me)
+        out, err = proc.communicate()
+    watcher.join(timeout=5)
+    if why:
+        return subprocess.CompletedProcess(cmd, RUNAWAY, out, why[0].encode())
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def cli(*args, cwd: Path | None = None, stdin: bytes | None = None
+        ) -> subprocess.CompletedProcess:
+    return run_capped([sys.executable, "-m", "pipeline", *map(str, args)], cwd, stdin)
 
 
 @dataclass
@@ -123,6 +188,10 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
     pq.write_table(pa.table({"t": pa.array(big.astype(np.uint64)), "q": list(q),
                              "v": list(v)}), b / "uint64.parquet")
     other = _parquet(b / "other.parquet", t[:100], q[:100], v[:100])
+    pq.write_table(pa.table({"t": [repr(x) for x in t], "q": list(q), "v": list(v)}),
+                   b / "text_t.parquet")
+    pq.write_table(pa.table({"t": pa.array(t.astype(np.float32), pa.float32()),
+                             "q": list(q), "v": list(v)}), b / "float32_t.parquet")
     lines = ["t," + ",".join(f"q{i}" for i in range(13)) + "," + ",".join(
         f"v{i}" for i in range(12))]
     lines += [",".join(repr(float(x)) for x in (tk, *qk, *vk)) for tk, qk, vk in zip(
@@ -142,10 +211,9 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
         return check
 
     def pipe(d: Path) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "pipeline", "import", "/dev/stdin",
-                               "--format", "csv", "--q", qcols, "--v", vcols, "--robot",
-                               "short_nominal", "--name", "piped", "--out", str(d / "logs")],
-                              cwd=ROOT, input=csv_bytes, capture_output=True, timeout=300)
+        return cli("import", "/dev/stdin", "--format", "csv", "--q", qcols, "--v", vcols,
+                   "--robot", "short_nominal", "--name", "piped", "--out", d / "logs",
+                   stdin=csv_bytes)
 
     def piped_hash(d: Path) -> str | None:
         md = pq.read_schema(d / imported.format("piped")).metadata
@@ -262,6 +330,106 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
         text = (d / "rep" / "imported" / "still" / "analysis.json").read_text()
         return "NaN in analysis.json" if "NaN" in text else None
 
+    # -- issue 49: simulated logs sealed, studies' counts, cluster limits, the import round --
+
+    def simulated(d: Path) -> Path:
+        r = cli("run", "short_nominal", "--out", d / "logs")
+        assert r.returncode == 0, r.stderr
+        return d / "logs" / "short_nominal" / "run.parquet"
+
+    def sim_edited(d: Path) -> subprocess.CompletedProcess:
+        path = simulated(d)
+        table = pq.read_table(path)
+        vv = np.array(table.column("v").to_pylist())
+        vv[1::2] *= -1.0  # smooth made period-2, every other check still whole
+        table = table.set_column(table.schema.get_field_index("v"), "v",
+                                 pa.array(list(vv), table.schema.field("v").type))
+        footer = {k: v for k, v in pq.read_metadata(path).metadata.items()
+                  if k != b"ARROW:schema"}  # every key the writer left, the old seal too
+        pq.write_table(table.replace_schema_metadata(footer), path)
+        return cli("analyze", path, "--out", d / "rep")
+
+    def sim_damaged_rerun(d: Path) -> subprocess.CompletedProcess:
+        path = simulated(d)
+        seal = pq.read_metadata(path).metadata[b"pipeline.table_sha256"]
+        (d / "seal").write_bytes(seal)
+        data = bytearray(path.read_bytes())
+        footer = int.from_bytes(data[-8:-4], "little") + 8
+        mid = (len(data) - footer) // 2
+        data[mid:mid + 64] = np.random.default_rng(49).bytes(64)
+        path.write_bytes(bytes(data))
+        return cli("run", "short_nominal", "--out", d / "logs")
+
+    def made_again(d: Path) -> str | None:
+        path = d / "logs" / "short_nominal" / "run.parquet"
+        seal = pq.read_metadata(path).metadata.get(b"pipeline.table_sha256")
+        return None if seal == (d / "seal").read_bytes() else "not the simulator's log again"
+
+    mc_text = ("description: fault suite\nmission: omega_ripple_sampled_delay_dt0035\n"
+               "set: {{mission.duration: {duration}}}\nseed: {seed}\n{samples}"
+               "target: {{p: {p}, confidence: 0.9}}\nripple_max: 1.0e-4\ndispersions:\n"
+               "  controller.gains.bus.D: {{dist: normal, sd: {sd}{truncate}}}\n")
+
+    def mc_file(d: Path, folder: str = "a", duration: float = 0.1, seed: int = 7,
+                samples: str = "samples: 2\n", p: float = 0.9, sd: float = 0.1,
+                truncate: str = "") -> Path:
+        (d / folder).mkdir(exist_ok=True)
+        path = d / folder / "seed.yaml"
+        path.write_text(mc_text.format(duration=duration, seed=seed, samples=samples, p=p,
+                                       sd=sd, truncate=truncate))
+        return path
+
+    def mc(d: Path, *extra, **fields) -> subprocess.CompletedProcess:
+        return cli("montecarlo", mc_file(d, **fields), "--workers", "1", "--logs",
+                   d / "logs", "--out", d / "out", *extra)
+
+    def second_mc(d: Path) -> subprocess.CompletedProcess:
+        first = mc(d)
+        assert first.returncode == 0, first.stderr
+        return cli("montecarlo", mc_file(d, folder="b", sd=0.3), "--workers", "1", "--logs",
+                   d / "logs", "--out", d / "out")
+
+    def record_folder(d: Path) -> subprocess.CompletedProcess:
+        (d / "logs" / "seed" / "seed__00000.json").mkdir(parents=True)
+        return mc(d)
+
+    def bad_spec(text: str) -> Callable[[Path], subprocess.CompletedProcess]:
+        return lambda d: cli("validate", spec(d, "extends: short_nominal\n" + text))
+
+    def zero_mapping(d: Path) -> subprocess.CompletedProcess:
+        return cli("import", good, "--robot", "short_nominal", "--mapping", "/dev/zero",
+                   "--out", d / "logs")
+
+    def crc(d: Path) -> subprocess.CompletedProcess:
+        import io
+        import zipfile
+
+        buf = io.BytesIO()
+        np.savez(buf, t=t, q=q, v=v)
+        data = bytearray(buf.getvalue())
+        with zipfile.ZipFile(io.BytesIO(bytes(data))) as z:
+            info = z.getinfo("q.npy")
+        at = info.header_offset + 30 + len(info.filename) + len(info.extra) + 200
+        data[at:at + 8] = b"\xff" * 8
+        (d / "crc.npz").write_bytes(bytes(data))
+        return _imp(d / "crc.npz", "x")(d)
+
+    def twice_named(d: Path) -> subprocess.CompletedProcess:
+        (d / "cols.csv").write_bytes(csv_bytes)
+        return _imp(d / "cols.csv", "x", "--q", ",".join([f"q{i}" for i in range(12)]
+                                                         + ["q11"]), "--v", vcols)(d)
+
+    def jitter_fifth(d: Path) -> subprocess.CompletedProcess:
+        tt = t.copy()
+        tt[5] += 0.199 * 0.03
+        tt[6] -= 0.199 * 0.03
+        return _imp(_parquet(d / "j.parquet", tt, q, v), "j2", "--max-jitter", "0.2")(d)
+
+    def jitter_controller(d: Path) -> subprocess.CompletedProcess:
+        _imp(b / "wander.parquet", "wc", "--max-jitter", "0.15")(d)
+        return cli("analyze", d / imported.format("wc"), "--controller", "short_nominal",
+                   "--out", d / "rep")
+
     return [
         Case("empty CSV", _imp(b / "empty.csv", "x"), 2, "empty: no header"),
         Case("CSV header only", _imp(b / "header.csv", "x"), 2, "no rows"),
@@ -318,26 +486,75 @@ def build_cases(base: dict, scratch: Path) -> list[Case]:
                             "--out", d / "logs"),
                         cli("analyze", d / "logs" / "s" / "run.parquet", "--out", d / "rep"))[1],
              2, "fewer than the 3"),
+        # -- issue 49 --
+        Case("a simulated log's v edited", sim_edited, 1, "pipeline.table_sha256"),
+        Case("a simulated log byte-damaged, run", sim_damaged_rerun, 0, "short_nominal",
+             made_again),
+        Case("samples: 10⁹", lambda d: mc(d, samples="samples: 1000000000\n"), 2,
+             "over the limit"),
+        Case("--samples 10⁹", lambda d: mc(d, "--samples", "1000000000"), 2, "over the limit"),
+        Case("target.p 0.9999999999", lambda d: mc(d, samples="", p=0.9999999999), 2,
+             "over the limit"),
+        Case("--samples 0", lambda d: mc(d, "--samples", "0"), 2, "give 1 or more"),
+        Case("--samples -1", lambda d: mc(d, "--samples", "-1"), 2, "give 1 or more"),
+        Case("truncate 1e-300", lambda d: mc(d, truncate=", truncate: 1.0e-300"), 2,
+             "truncate"),
+        Case("Monte Carlo seed -1", lambda d: mc(d, seed=-1), 2, "seed"),
+        Case("Monte Carlo duration 10⁶ s", lambda d: mc(d, duration=1.0e6), 2,
+             "mission.duration"),
+        Case("--workers 1000", lambda d: mc(d, "--workers", "1000"), 2, "--workers 1000"),
+        Case("--scheduler 'not an address'", lambda d: mc(d, "--scheduler", "not an address"),
+             2, "not a scheduler address"),
+        Case("a second Monte Carlo file, same name", second_mc, 2, "--force",
+             keep=["out/seed/verdict.json"]),
+        Case("a sample's record path a folder", record_folder, 2, "not a file"),
+        Case("controller.gains.bus.D 1e308",
+             bad_spec("controller: {gains: {bus: {D: 1.0e+308}}}\n"), 2,
+             "controller.gains.bus.D"),
+        Case("controller.null_space.D 1e-300",
+             bad_spec("controller: {null_space: {D: 1.0e-300}}\n"), 2,
+             "controller.null_space.D"),
+        Case("config_sampling.seed -1", bad_spec("config_sampling: {seed: -1}\n"), 2,
+             "config_sampling.seed"),
+        Case("timing.seed -5", bad_spec("mission: {plant: {model: sampled, timing: "
+                                        "{seed: -5}}}\n"), 2, "seed"),
+        Case("import /dev/zero --format parquet",
+             lambda d: cli("import", "/dev/zero", "--format", "parquet", "--robot",
+                           "short_nominal", "--out", d / "logs"), 2, "not a regular file"),
+        Case("--mapping /dev/zero", zero_mapping, 2, "longer than 16 MiB"),
+        Case("--time '[5]' past the columns", _imp(good, "x", "--time", "[5]"), 2, "column 5"),
+        Case("a damaged .npz member (CRC)", crc, 2, "damaged member"),
+        Case("text stamps in Parquet", _imp(b / "text_t.parquet", "x"), 2, "not numbers"),
+        Case("float32 stamps", _imp(b / "float32_t.parquet", "f32"), 0, "rows at dt",
+             same_as_source("f32")),
+        Case("--q naming a column twice", twice_named, 2, "named twice"),
+        Case("jitter 0.2·dt, --max-jitter 0.2", jitter_fifth, 0, "rows at dt",
+             same_as_source("j2")),
+        Case("jittered import analysed with its controller", jitter_controller, 0, ""),
     ]
 
 
 def _one_error_line(err: str, needle: str) -> bool:
     """The refusal is one line, the last, naming the problem; any line before it is a stage's
-    own progress (``report: started``, ``report: failed after 0.5 s``)."""
+    own progress (``report: started``, ``report: failed after 0.5 s``), or argparse's usage
+    before its own one line (``python -m pipeline montecarlo: error: argument …``)."""
     lines = err.strip().splitlines()
+    argparse_error = bool(lines) and lines[0].startswith("usage:") and ": error: " in lines[-1]
     return (bool(lines) and needle in lines[-1]
-            and lines[-1].startswith(("error:", "claim ", "log "))
+            and (lines[-1].startswith(("error:", "claim ", "log ")) or argparse_error)
             and all(not ln.startswith(("error", "warning: Runtime")) for ln in lines[:-1]))
 
 
 def run_case(case: Case, scratch: Path) -> Outcome:
     d = scratch / "".join(c if c.isalnum() else "_" for c in case.name)
-    d.mkdir()
+    d.mkdir(parents=True)
     r = case.run(d)
     out = r.stdout.decode() if isinstance(r.stdout, bytes) else (r.stdout or "")
     err = r.stderr.decode() if isinstance(r.stderr, bytes) else (r.stderr or "")
     problem = None
-    if "Traceback" in err:
+    if r.returncode == RUNAWAY:
+        problem = f"runaway: {err}"
+    elif "Traceback" in err:
         problem = "traceback"
     elif r.returncode != case.code:
         problem = f"exit {r.returncode}, expected {case.code}: {err.strip()[:200]}"
@@ -353,9 +570,34 @@ def run_case(case: Case, scratch: Path) -> Outcome:
     return Outcome(case, r.returncode, err, problem)
 
 
+def run_pass(label: str, cases: list[Case], scratch: Path) -> list[Outcome]:
+    """Every case once, in a folder of its own under ``scratch``; prints one line each and
+    the totals."""
+    outcomes = []
+    for case in cases:
+        t0 = time.perf_counter()
+        o = run_case(case, scratch)
+        outcomes.append(o)
+        status = "ok" if o.problem is None else f"WRONG: {o.problem}"
+        print(f"[{label}] {case.name:44s} exit {o.code:5d}  {time.perf_counter() - t0:5.1f} s  "
+              f"{status}", flush=True)
+    refused = sum(o.problem is None and o.case.code != 0 for o in outcomes)
+    accepted = sum(o.problem is None and o.case.code == 0 for o in outcomes)
+    tracebacks = sum(o.problem == "traceback" for o in outcomes)
+    runaway = sum((o.problem or "").startswith("runaway") for o in outcomes)
+    lost = sum((o.problem or "").startswith("data lost") for o in outcomes)
+    wrong = sum(o.problem is not None for o in outcomes) - tracebacks - runaway - lost
+    print(f"[{label}] cases {len(outcomes)}: refused cleanly {refused}, accepted rightly "
+          f"{accepted}, tracebacks {tracebacks}, wrong answers {wrong}, runaway {runaway}, "
+          f"data lost {lost}", flush=True)
+    return outcomes
+
+
 def main() -> int:
+    global AS_LIMIT
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--keep", metavar="DIR", help="build the cases in DIR and keep it")
+    ap.add_argument("--only", metavar="TEXT", help="run only the cases whose name holds TEXT")
     a = ap.parse_args()
     scratch = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="fault_suite."))
     scratch.mkdir(parents=True, exist_ok=True)
@@ -367,24 +609,16 @@ def main() -> int:
         table = pq.read_table(scratch / "base" / "short_nominal" / "run.parquet",
                               columns=["t", "q", "v"]).to_pydict()
         base = {k: np.array(v) for k, v in table.items()}
-        cases = build_cases(base, scratch)
-        outcomes = []
-        for case in cases:
-            t0 = time.perf_counter()
-            o = run_case(case, scratch)
-            outcomes.append(o)
-            status = "ok" if o.problem is None else f"WRONG: {o.problem}"
-            print(f"{case.name:38s} exit {o.code}  {time.perf_counter() - t0:5.1f} s  {status}",
-                  flush=True)
-        refused = sum(o.problem is None and o.case.code != 0 for o in outcomes)
-        accepted = sum(o.problem is None and o.case.code == 0 for o in outcomes)
-        tracebacks = sum(o.problem == "traceback" for o in outcomes)
-        lost = sum((o.problem or "").startswith("data lost") for o in outcomes)
-        wrong = sum(o.problem is not None for o in outcomes) - tracebacks - lost
-        print(f"cases {len(outcomes)}: refused cleanly {refused}, accepted rightly {accepted}, "
-              f"tracebacks {tracebacks}, wrong answers {wrong}, data lost {lost}")
-        return 0 if refused + accepted == len(outcomes) else 1
+        cases = [c for c in build_cases(base, scratch) if not a.only or a.only in c.name]
+        quarter = psutil.virtual_memory().total // 4
+        ok = True
+        for label, limit in (("plain", None), (f"ulimit -v {quarter // 1024}", quarter)):
+            AS_LIMIT = limit
+            outcomes = run_pass(label, cases, scratch / ("plain" if limit is None else "as"))
+            ok = ok and all(o.problem is None for o in outcomes)
+        return 0 if ok else 1
     finally:
+        AS_LIMIT = None
         if not a.keep:
             shutil.rmtree(scratch, ignore_errors=True)
 
