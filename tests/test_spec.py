@@ -363,3 +363,18 @@ def test_the_inert_fields_change_no_run_and_no_hash(tmp_path):
     assert with_overrides(base, {"config_sampling.seed": 3}).spec_hash != base.spec_hash
     logs = [pq.read_table(run_spec(s, tmp_path / d).path) for s, d in ((base, "x"), (other, "y"))]
     assert all(logs[0].column(c).equals(logs[1].column(c)) for c in logs[0].column_names)
+
+
+def test_a_posture_outside_a_joints_range_is_refused_naming_it(tmp_path):
+    """Issue 50: robot.q_bar must be a posture the arm can take. The seed robot's wrist_1 is
+    limited to [-3.67, 0.524] rad in its file (the precursor's range);
+    1.0 rad is outside it."""
+    from conftest import run_cli_in_process
+
+    path = tmp_path / "outside.yaml"
+    path.write_text("extends: nominal\nrobot: {q_bar: [0.0, -0.367, -1.763, 1.0, -5.95, 0.0]}\n")
+    r = run_cli_in_process("validate", path)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "field robot.q_bar: wrist_1_joint at 1 rad is outside its " \
+        "range" in lines[0], lines

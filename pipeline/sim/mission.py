@@ -50,7 +50,7 @@ from pipeline.sim.margins import (
 )
 from pipeline.sim.plant import held_command, integrate_held, integrate_split, limit_bus_torque
 from pipeline.sim.robot import GiordanoRobot, Terms
-from pipeline.sim.robot_file import check_null_space
+from pipeline.sim.robot_file import check_null_space, check_posture_limits
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.sensors import Measurement
 from pipeline.sim.stability import (
@@ -111,6 +111,7 @@ class Mission:
         self.spec = spec
         self.robot = robot or GiordanoRobot(spec)
         check_null_space(spec, self.robot.shape)
+        check_posture_limits(spec, self.robot.model)
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self.layout: StepLayout = step_layout(self.robot.shape)

@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
-from pipeline.shapes import MAX_JOINTS, TASK_DOF, RobotShape
+from pipeline.shapes import MAX_JOINTS, TASK_DOF, Q, RobotShape
 from pipeline.sim.inertial import set_inertial
 from pipeline.sim.robot_crosscheck import crosscheck_robot_file
 from pipeline.spec import Spec
@@ -266,6 +266,20 @@ def load_spec_robot(spec: Spec) -> pin.Model:
                         f"angles for the {shape.n} arm joints of {spec.robot_path.name} "
                         f"({', '.join(shape.joints)})")
     return model
+
+
+def check_posture_limits(spec: Spec, model: pin.Model) -> None:
+    """SpecError naming the first arm joint whose ``robot.q_bar`` angle lies outside the robot
+    file's position range (issue 50): the posture the loop holds the arm near, and the start
+    its sampler searches around, must be one the arm can take. The loop's check, not the
+    robot's: an imported log's spec carries the robot and no posture of its own."""
+    lo, hi = model.lowerPositionLimit[Q.joints], model.upperPositionLimit[Q.joints]
+    for name, q, a, b in zip(robot_shape(model).joints, spec.robot.q_bar, lo, hi,
+                             strict=True):
+        if not a <= q <= b:
+            raise SpecError(f"spec {spec.name}: field robot.q_bar: {name} at {q:.4g} rad is "
+                            f"outside its range [{a:.4g}, {b:.4g}] rad in "
+                            f"{spec.robot_path.name}")
 
 
 def check_null_space(spec: Spec, shape: RobotShape) -> None:
