@@ -551,7 +551,10 @@ def _one_error_line(err: str, needle: str) -> bool:
 def run_case(case: Case, scratch: Path) -> Outcome:
     d = scratch / "".join(c if c.isalnum() else "_" for c in case.name)
     d.mkdir(parents=True)
-    r = case.run(d)
+    try:
+        r = case.run(d)
+    except Exception as exc:  # a step before the case's command failed: the case fails
+        return Outcome(case, -1, "", f"its set-up failed ({type(exc).__name__}: {exc})")
     out = r.stdout.decode() if isinstance(r.stdout, bytes) else (r.stdout or "")
     err = r.stderr.decode() if isinstance(r.stderr, bytes) else (r.stderr or "")
     problem = None
@@ -566,7 +569,10 @@ def run_case(case: Case, scratch: Path) -> Outcome:
     elif case.code == 0 and case.needle and case.needle not in out + err:
         problem = f"{case.needle!r} not said: {(out + err).strip()[:300]}"
     elif case.check is not None:
-        problem = case.check(d)
+        try:
+            problem = case.check(d)
+        except Exception as exc:  # what the check reads is not there: a wrong answer
+            problem = f"its check failed ({type(exc).__name__}: {exc})"
     for rel in case.keep:
         if not (d / rel).is_file():
             problem = f"data lost: {rel}"
