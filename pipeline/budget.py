@@ -24,6 +24,7 @@ chunks and stops at its bound.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass
@@ -69,10 +70,13 @@ class Budget:
                    seconds=3600.0 * (hours if hours is not None else DEFAULT_TIME_H))
 
 
+@functools.cache
 def memory_limit() -> float:
     """Bytes this process may use: the least of half the RAM, its cgroup's memory limit and
     what RLIMIT_AS leaves (the soft limit less the address space already reserved: Python,
-    NumPy, LLVM and the libraries take some hundreds of MB of it before any data)."""
+    NumPy, LLVM and the libraries take some hundreds of MB of it before any data). Taken once
+    per process, before its data: what the process reads later is inside the budget, not
+    taken off it again."""
     import resource
 
     import psutil
@@ -88,30 +92,50 @@ def memory_limit() -> float:
 
 
 def cgroup_memory_limit() -> float | None:
-    """The memory limit of this process's cgroup (v2 ``memory.max``, v1
-    ``memory.limit_in_bytes``), None where there is none or it cannot be read."""
+    """The least memory limit on this process's cgroup and its ancestors (v2 ``memory.max``
+    of each level; v1 ``hierarchical_memory_limit``, which includes the parents', else
+    ``memory.limit_in_bytes``), looked for under the cgroup's path and at the mount's root (a
+    container's namespace shows its own cgroup there); None where there is none or it cannot
+    be read."""
     from pathlib import Path
 
     try:
         lines = Path("/proc/self/cgroup").read_text().splitlines()
     except OSError:
         return None
-    candidates = []
+    found: list[float] = []
+
+    def number(text: str) -> float | None:
+        text = text.strip()
+        return float(text) if text.isdigit() and int(text) < 2**60 else None  # v1: "none" huge
+
     for line in lines:
         _, controllers, where = [*line.split(":", 2), "", ""][:3]
-        where = where.lstrip("/")
-        if controllers == "":  # v2: one unified hierarchy
-            candidates.append(Path("/sys/fs/cgroup") / where / "memory.max")
+        parts = [p for p in where.strip("/").split("/") if p]
+        if controllers == "":  # v2: one unified hierarchy, each level's memory.max
+            root = Path("/sys/fs/cgroup")
+            for k in range(len(parts), -1, -1):
+                try:
+                    x = number((root.joinpath(*parts[:k]) / "memory.max").read_text())
+                except OSError:
+                    continue
+                if x is not None:
+                    found.append(x)
         elif "memory" in controllers.split(","):
-            candidates.append(Path("/sys/fs/cgroup/memory") / where / "memory.limit_in_bytes")
-    for path in candidates:
-        try:
-            text = path.read_text().strip()
-        except OSError:
-            continue
-        if text.isdigit() and int(text) < 2**60:  # v1 writes "no limit" as a huge number
-            return float(text)
-    return None
+            root = Path("/sys/fs/cgroup/memory")
+            for folder in (root.joinpath(*parts), root):
+                try:
+                    stat = (folder / "memory.stat").read_text()
+                    x = next((number(ln.split()[1]) for ln in stat.splitlines()
+                              if ln.startswith("hierarchical_memory_limit ")), None)
+                    x = x if x is not None else number(
+                        (folder / "memory.limit_in_bytes").read_text())
+                except (OSError, IndexError):
+                    continue
+                if x is not None:
+                    found.append(x)
+                break
+    return min(found) if found else None
 
 
 def _env_float(name: str) -> float | None:

@@ -344,7 +344,11 @@ def require_columns(path: Path, columns: list[str]) -> None:
 
 
 def _check_columns(path: Path, pf: pq.ParquetFile, columns: list[str]) -> None:
-    names = set(pf.schema_arrow.names)
+    all_names = pf.schema_arrow.names
+    twice = sorted({n for n in all_names if all_names.count(n) > 1})
+    if twice:
+        raise _damaged(path, f"column {twice[0]}", "named twice in the file")
+    names = set(all_names)
     for c in columns:
         if c not in names:
             raise LogError(f"{path}: required column {c!r} missing")

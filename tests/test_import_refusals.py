@@ -118,3 +118,13 @@ def test_a_bags_column_options_are_refused_not_recorded(tmp_path):
     with pytest.raises(SpecError, match="field q: a rosbag log's t, q and v come from its "
                                         "topics"):
         read_bag(tmp_path / "bag", mapping, "rosbag", [])
+
+
+def test_a_timestamp_time_column_imports_as_before(cols, tmp_path):
+    """pandas writes a time column as timestamp[ns]: a time, not text; it imports (its
+    ticks in the unit --time-unit names, as before the Arrow types were checked)."""
+    ns = (cols["t"] * 1e9).round().astype("int64")
+    src = _parquet(tmp_path / "ts.parquet", t=pa.array(ns, pa.timestamp("ns")),
+                   q=list(cols["q"]), v=list(cols["v"]))
+    done = import_log(src, _mapping(time_unit="ns"), "ts", tmp_path / "logs")
+    assert verify_log(done.path).rows == len(cols["t"])

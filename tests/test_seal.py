@@ -134,3 +134,14 @@ def test_a_log_without_a_seal_is_refused_and_made_again(genuine, tmp_path):
         verify_log(path)
     assert not ArtefactStore(tmp_path / "logs").run(SPEC, quiet=True).reused
     verify_log(path)
+
+
+def test_a_column_named_twice_is_refused_in_one_line(genuine, tmp_path):
+    """A file with two columns of one name (possible in Parquet) is damaged, not a
+    traceback of the seal's digest."""
+    path = _copy(genuine, tmp_path)
+    t = pq.read_table(genuine)
+    twice = pa.Table.from_arrays([*t.columns, t.column("t")], names=[*t.column_names, "t"])
+    pq.write_table(twice.replace_schema_metadata(footer_metadata(genuine)), path)
+    with pytest.raises(LogDamaged, match="column t: named twice"):
+        verify_log(path)

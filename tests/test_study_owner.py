@@ -54,7 +54,22 @@ def test_claim_folders_refuses_another_owner_and_writes_nothing(tmp_path):
     assert (logs / "seed_0.json").is_file()
     claim_folders("montecarlo", "seed", a, [logs, out])  # its own: no refusal
     claim_folders("montecarlo", "seed", b, [logs, out], force=True)
-    assert owner(logs) == str(b.resolve()) and not (logs / "seed_0.json").exists()
+    # --force gives the folders to b and removes nothing: b's results replace a's as they
+    # are written, a's other records stay (keyed by their content, never read for b)
+    assert owner(logs) == str(b.resolve()) and (logs / "seed_0.json").is_file()
+
+
+def test_a_folder_whose_owner_file_is_gone_is_taken_over(tmp_path, capsys):
+    """A checkout moved or renamed: the recorded owner is no longer there, and `make all`
+    cannot pass --force; the folder is taken over and that is said."""
+    a = _file(tmp_path / "a")
+    logs = tmp_path / "logs" / "seed"
+    claim_folders("montecarlo", "seed", a, [logs])
+    moved = tmp_path / "moved"
+    (tmp_path / "a").rename(moved)
+    claim_folders("montecarlo", "seed", moved / "seed.yaml", [logs])
+    assert owner(logs) == str((moved / "seed.yaml").resolve())
+    assert "(no longer there)" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -283,13 +283,15 @@ def _numpy_column(col: pa.ChunkedArray) -> np.ndarray:
 
 
 def _arrow_numbers(source: Path, name: str, typ: pa.DataType) -> None:
-    """SpecError unless a binary column holds numbers (integers or floats, or lists of them):
-    text is not parsed, booleans are not 0 and 1."""
+    """SpecError unless a binary column holds numbers (integers or floats, or lists of them;
+    timestamps and durations, as pandas writes a time column): text is not parsed, booleans
+    are not 0 and 1."""
     inner = typ
     while pa.types.is_list(inner) or pa.types.is_fixed_size_list(inner) \
             or pa.types.is_large_list(inner):
         inner = inner.value_type
-    if not (pa.types.is_integer(inner) or pa.types.is_floating(inner)):
+    if not (pa.types.is_integer(inner) or pa.types.is_floating(inner)
+            or pa.types.is_timestamp(inner) or pa.types.is_duration(inner)):
         raise SpecError(f"{source}: column {name!r}: {inner} values, not numbers (a binary "
                         f"format's numbers are written as numbers)")
 

@@ -6,12 +6,16 @@ name (``a/seed.yaml`` and ``b/seed.yaml``, other dispersions) would share them, 
 silently replacing the first's verdict and records. So each folder names the file that owns
 it (:data:`OWNER_FILE`: the file's resolved path), and a study that would take a folder
 another file owns is refused in one line before anything runs, unless ``--force``, which
-replaces the other's results (as an import of another source under a name in use). The same
-file edited keeps its folders: its results are superseded by their key, as before.
+gives them to this file: its table and verdict then replace the other's, and its samples'
+records replace those of the same names (the rest stay, keyed by their content, never read
+for this file). A folder whose owner file is gone (a checkout moved or renamed) is taken
+over, and said so. The same file edited keeps its folders: its results are superseded by
+their key, as before.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -20,9 +24,6 @@ from pipeline.errors import SpecError
 from pipeline.paths import display_path
 
 OWNER_FILE = ".study_file"  # in each of a study's folders: the owning file's resolved path
-# What a study writes in its folders, removed when --force gives them to another file: the
-# kept records (sealed JSON), the tables and the verdicts or results.
-RESULT_PATTERNS = ("*.json", "*.parquet")
 
 
 def check_record_paths(kind: str, name: str, root: Path, samples: Iterable[str]) -> None:
@@ -50,31 +51,30 @@ def owner(folder: Path) -> str | None:
 def check_owners(kind: str, name: str, file: Path, folders: Iterable[Path],
                  force: bool = False) -> list[tuple[Path, str]]:
     """The folders another file owns, with their owners; a SpecError (exit 2) naming the
-    first and its owner unless ``force``. Reads only: a command checks this before it starts
-    anything, and claims the folders (:func:`claim_folders`) once it can run."""
+    first and its owner unless ``force`` or that owner file is gone. Reads only: a command
+    checks this before it starts anything, and claims the folders (:func:`claim_folders`)
+    once it can run."""
     me = str(Path(file).resolve())
     taken = [(f, o) for f in map(Path, folders) if (o := owner(f)) is not None and o != me]
-    if taken and not force:
-        folder, other = taken[0]
-        gone = "" if Path(other).is_file() else " (no longer there)"
+    held = [(f, o) for f, o in taken if Path(o).is_file()]
+    if held and not force:
+        folder, other = held[0]
         raise SpecError(f"{kind} {name}: {display_path(folder)} holds the results of another "
-                        f"{kind} file of that name, {other}{gone}; give this file another "
-                        "name, another --logs and --out, or pass --force to replace them")
+                        f"{kind} file of that name, {other}; give this file another name, "
+                        "another --logs and --out, or pass --force to replace them")
     return taken
 
 
 def claim_folders(kind: str, name: str, file: Path, folders: Iterable[Path],
                   force: bool = False) -> None:
-    """Make ``folders`` the study file ``file``'s (:func:`check_owners` first); ``force``
-    removes another file's results there first. Nothing is written before every folder is
-    checked."""
+    """Make ``folders`` the study file ``file``'s (:func:`check_owners` first). Nothing is
+    removed: this file's results replace the other's as they are written."""
     me = str(Path(file).resolve())
     folders = [Path(f) for f in folders]
-    taken = check_owners(kind, name, file, folders, force)
-    for folder, _ in taken:
-        for pattern in RESULT_PATTERNS:
-            for path in folder.glob(pattern):
-                path.unlink(missing_ok=True)
+    for folder, other in check_owners(kind, name, file, folders, force):
+        gone = "" if Path(other).is_file() else " (no longer there)"
+        print(f"{kind} {name}: {display_path(folder)} was {other}'s{gone}; now {me}'s",
+              file=sys.stderr)
     for folder in folders:
         if owner(folder) != me:
             folder.mkdir(parents=True, exist_ok=True)

@@ -339,7 +339,8 @@ def power_command(args: argparse.Namespace) -> int:
                              slurm_log_dir=root.parent / ".slurm",
                              worker_timeout=args.worker_timeout or WORKER_TIMEOUT)
     check_workers(options, scheduler_address(options.scheduler))
-    check_study_time(plan.seconds, len(plan.samples), args.workers, f"power {plan.name}")
+    if not scheduler_address(options.scheduler):  # a scheduler's workers are its own
+        check_study_time(plan.seconds, len(plan.samples), args.workers, f"power {plan.name}")
     check_record_paths("power", plan.name, root, [s.name for s in plan.samples])
     check_owners("power", plan.name, plan.path, (root, out), args.force)
     samples = {s.name: s for s in plan.samples}

@@ -84,8 +84,9 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT):
     try:
         # A malformed address is refused before a Client is made: a Client that fails to
         # start leaves a half-made object whose __del__ waits 10 s at exit, then prints a
-        # traceback after the one-line error.
-        get_address_host_port(address)
+        # traceback after the one-line error. Other protocols (ucx://) are the Client's.
+        if "://" not in address or address.split("://", 1)[0] in ("tcp", "tls"):
+            get_address_host_port(address)
     except ValueError as exc:
         raise SpecError(f"--scheduler {address}: not a scheduler address such as "
                         f"tcp://10.0.0.5:8786 ({exc})") from None
@@ -223,11 +224,24 @@ def check_workers(options: ClusterOptions, address: str | None = None) -> None:
         cap, where = ((cpus, f"the SLURM cluster's {cpus} CPUs (sinfo)") if cpus else
                       (MAX_SLURM_WORKERS, f"{MAX_SLURM_WORKERS:,}, the most this asks SLURM for"))
     else:
-        cap = os.cpu_count() or 1
-        where = f"this machine's {cap} cores (the embedded cluster; --slurm or --scheduler " \
-                "for more)"
+        cores = usable_cores()
+        if cores is None:  # not known here: nothing to judge against
+            return
+        # The default of 2 stays usable on a one-core machine (two workers share it).
+        cap = max(cores, 2)
+        where = f"this machine's {cores} usable cores (the embedded cluster; --slurm or " \
+                "--scheduler for more)"
     if n > cap:
         raise SpecError(f"--workers {n}: more than {where}")
+
+
+def usable_cores() -> int | None:
+    """The cores this process may run on (its CPU affinity: a cpuset or taskset sees fewer
+    than the machine has), None when not known."""
+    try:
+        return len(os.sched_getaffinity(0)) or None
+    except (AttributeError, OSError):
+        return os.cpu_count()
 
 
 def slurm_cpus() -> int | None:
