@@ -215,13 +215,13 @@ def check_samples(n: int, what: str) -> None:
 
 
 def check_study_time(seconds: float, n: int, workers: int, what: str,
-                     budget: Budget | None = None) -> None:
-    """SpecError when ``n`` samples estimated at ``seconds`` in all, shared among
+                     budget: Budget | None = None, unit: str = "samples") -> None:
+    """SpecError when ``n`` tasks (``unit``) estimated at ``seconds`` in all, shared among
     ``workers``, exceed the time budget."""
     budget = budget or Budget.from_environment()
     total = seconds / max(workers, 1)
     if total > budget.seconds:
-        raise SpecError(f"{what}: {n:,} samples on {workers} workers would take about "
+        raise SpecError(f"{what}: {n:,} {unit} on {workers} workers would take about "
                         f"{_h(total)}, over the time budget of {_h(budget.seconds)} "
                         f"(BREVE_TIME_BUDGET_H)")
 
@@ -229,9 +229,4 @@ def check_study_time(seconds: float, n: int, workers: int, what: str,
 def check_sweep_time(per_point_seconds: float, n_points: int, workers: int, what: str,
                      budget: Budget | None = None) -> None:
     """SpecError when the sweep's points, shared among ``workers``, exceed the time budget."""
-    budget = budget or Budget.from_environment()
-    total = per_point_seconds * n_points / max(workers, 1)
-    if total > budget.seconds:
-        raise SpecError(f"{what}: {n_points:,} points on {workers} workers would take about "
-                        f"{_h(total)}, over the time budget of {_h(budget.seconds)} "
-                        f"(BREVE_TIME_BUDGET_H)")
+    check_study_time(per_point_seconds * n_points, n_points, workers, what, budget, "points")

@@ -109,8 +109,7 @@ def montecarlo_command(args: argparse.Namespace) -> int:
     if args.sample is not None:
         return run_one(args)
     mc = plan_montecarlo(args.file, args.samples)
-    from pipeline.budget import check_study_time
-    from pipeline.montecarlo.owner import check_owners, check_record_paths, claim_folders
+    from pipeline.montecarlo.owner import check_start, claim_folders
     from pipeline.montecarlo.task import cached_record
     from pipeline.montecarlo.verdict import (
         TABLE_NAME,
@@ -120,13 +119,7 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         verdict_json,
     )
     from pipeline.provenance.keys import sample_version
-    from pipeline.sweep.cluster import (
-        WORKER_TIMEOUT,
-        ClusterOptions,
-        check_workers,
-        open_client,
-        scheduler_address,
-    )
+    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
     from pipeline.sweep.driver import _raise_stop, _Stop, check_writable
     from pipeline.sweep.results import write_table
 
@@ -138,11 +131,8 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
         slurm_log_dir=root.parent / ".slurm",
         worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
-    check_workers(options, scheduler_address(options.scheduler))
-    if not scheduler_address(options.scheduler):  # a scheduler's workers are its own
-        check_study_time(mc.seconds, len(mc.samples), args.workers, f"montecarlo {mc.name}")
-    check_record_paths("montecarlo", mc.name, root, [s.spec.name for s in mc.samples])
-    check_owners("montecarlo", mc.name, mc.path, (root, out), args.force)
+    check_start("montecarlo", mc.name, mc.path, (root, out), options, mc.seconds,
+                [s.spec.name for s in mc.samples], args.force)
     t0 = time.perf_counter()
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

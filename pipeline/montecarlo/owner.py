@@ -26,12 +26,31 @@ from pipeline.paths import display_path
 OWNER_FILE = ".study_file"  # in each of a study's folders: the owning file's resolved path
 
 
+def check_start(kind: str, name: str, file: Path, folders: tuple[Path, ...], options,
+                seconds: float, samples: list[str], force: bool) -> None:
+    """What a study command checks before it starts a cluster (SpecError, exit 2, one line):
+    the workers it asks for (``options``, a ``ClusterOptions``), its samples' ``seconds`` on
+    them within the time budget (not judged on an existing scheduler's workers, its own), the
+    samples' record paths under the first folder, and that no other file owns ``folders``."""
+    from pipeline.budget import check_study_time
+    from pipeline.sweep.cluster import check_workers, scheduler_address
+
+    address = scheduler_address(options.scheduler)
+    check_workers(options, address)
+    if not address:
+        check_study_time(seconds, len(samples), options.workers, f"{kind} {name}")
+    check_record_paths(kind, name, folders[0], samples)
+    check_owners(kind, name, file, folders, force)
+
+
 def check_record_paths(kind: str, name: str, root: Path, samples: Iterable[str]) -> None:
     """SpecError naming the first of the samples' kept-record paths under ``root`` that is
     there but is not a file (a folder, a device): a record could not be kept there, and every
     flight into it would be lost."""
+    from pipeline.montecarlo.task import record_path
+
     for sample in samples:
-        path = Path(root) / f"{sample}.json"
+        path = record_path(root, sample)
         if path.exists() and not path.is_file():
             raise SpecError(f"{kind} {name}: {display_path(path)}: not a file, where the "
                             "sample's record is kept; move it away")

@@ -38,7 +38,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.atomic_files import atomic_write_text
-from pipeline.budget import Budget, check_mission, check_samples, check_study_time
+from pipeline.budget import Budget, check_mission, check_samples
 from pipeline.errors import LogError, RunFailed, SpecError
 from pipeline.montecarlo.plan import resolve_montecarlo
 from pipeline.montecarlo.sealed import sealed_json, unseal
@@ -321,14 +321,8 @@ def power_command(args: argparse.Namespace) -> int:
     plan = plan_power(args.file, args.samples)
     import pandas as pd
 
-    from pipeline.montecarlo.owner import check_owners, check_record_paths, claim_folders
-    from pipeline.sweep.cluster import (
-        WORKER_TIMEOUT,
-        ClusterOptions,
-        check_workers,
-        open_client,
-        scheduler_address,
-    )
+    from pipeline.montecarlo.owner import check_start, claim_folders
+    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
     from pipeline.sweep.driver import check_writable, execute_tasks
 
     root = Path(args.logs).resolve() / plan.name
@@ -338,11 +332,8 @@ def power_command(args: argparse.Namespace) -> int:
     options = ClusterOptions(scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
                              slurm_log_dir=root.parent / ".slurm",
                              worker_timeout=args.worker_timeout or WORKER_TIMEOUT)
-    check_workers(options, scheduler_address(options.scheduler))
-    if not scheduler_address(options.scheduler):  # a scheduler's workers are its own
-        check_study_time(plan.seconds, len(plan.samples), args.workers, f"power {plan.name}")
-    check_record_paths("power", plan.name, root, [s.name for s in plan.samples])
-    check_owners("power", plan.name, plan.path, (root, out), args.force)
+    check_start("power", plan.name, plan.path, (root, out), options, plan.seconds,
+                [s.name for s in plan.samples], args.force)
     samples = {s.name: s for s in plan.samples}
     t0 = time.perf_counter()
     with open_client(options) as session:

@@ -180,21 +180,26 @@ def _timed(setting: str, root: Path, here, on_cluster) -> Throughput:
     return throughput_of(setting, 2, startup, wall, records)
 
 
-def sweep_throughput(settings: tuple[str, ...] = ("inprocess", "local2", "slurm2"),
-                     progress=print) -> dict[str, Throughput]:
+SETTINGS = ("inprocess", "local2", "slurm2")
+
+
+def _each_setting(measure_in, what: str, settings: tuple[str, ...], progress
+                  ) -> dict[str, Throughput]:
+    """``measure_in(setting, folder)`` for each setting, each in a fresh folder."""
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for s in settings:
-            progress(f"sweep throughput: {s}, 32 points")
-            out[s] = measure(s, Path(tmp) / s)
+            progress(f"{what}: {s}")
+            out[s] = measure_in(s, Path(tmp) / s)
     return out
 
 
-def montecarlo_throughput(settings: tuple[str, ...] = ("inprocess", "local2", "slurm2"),
-                          progress=print) -> dict[str, Throughput]:
-    out = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for s in settings:
-            progress(f"Monte Carlo throughput: {s}, {MC_SAMPLES} samples of {MC_FILE}")
-            out[s] = measure_montecarlo(s, Path(tmp) / s)
-    return out
+def sweep_throughput(settings: tuple[str, ...] = SETTINGS, progress=print
+                     ) -> dict[str, Throughput]:
+    return _each_setting(measure, "sweep throughput, 32 points", settings, progress)
+
+
+def montecarlo_throughput(settings: tuple[str, ...] = SETTINGS, progress=print
+                          ) -> dict[str, Throughput]:
+    return _each_setting(measure_montecarlo, f"Monte Carlo throughput, {MC_SAMPLES} samples "
+                         f"of {MC_FILE}", settings, progress)
