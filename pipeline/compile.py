@@ -299,12 +299,14 @@ def _step() -> None:
 def _analysis() -> None:
     import numpy as np
 
-    from pipeline.sim.linalg import batched_singular_values, svd_right
+    from pipeline.sim.linalg import batched_singular_values, svd_right, svd_right_sequence
 
     s = seed()
     gamma = s.robot.gamma_matrices(np.stack([s.q, s.q]))  # Γ rebuilt from logged q (eq. 5)
     batched_singular_values(gamma[np.array([True, False])])
     svd_right(gamma)
+    _, Vt = svd_right_sequence(gamma[np.array([True, False])], np.empty((0, 0)))
+    svd_right_sequence(gamma[np.array([False, True])], np.ascontiguousarray(Vt[-1].T))
 
 
 def _plant() -> None:

@@ -807,7 +807,67 @@ def kernel_outputs(x: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     for name in ("A", "graded", "tall"):
         out[f"svd_{name}_U"], out[f"svd_{name}_s"], out[f"svd_{name}_Vt"] = linalg.svd(x[name])
     out["svd_right_S"], out["svd_right_Vt"] = linalg.svd_right(x["stack"])
+    out["svd_right_sequence_S"], out["svd_right_sequence_Vt"] = linalg.svd_right_sequence(
+        x["stack"], np.empty((0, 0)))
     return out
+
+
+def drifting_sequence(rng: np.random.Generator, n: int, steps: int) -> np.ndarray:
+    """A_k = U_k diag(s_k) V_kᵀ with U, V turned by a fixed small rotation each step and σ
+    graded 3 … 0.03 moving by 0.1 % a step, one pair crossing: a Γ over consecutive steps."""
+    def turn(scale):
+        X = rng.standard_normal((n, n)) * scale
+        return scipy.linalg.expm(X - X.T)
+    U, V = orthonormal(rng, n, n), orthonormal(rng, n, n)
+    dU, dV = turn(2e-3), turn(2e-3)
+    s0 = np.logspace(np.log10(3.0), np.log10(0.03), n)
+    out = np.empty((steps, n, n))
+    for k in range(steps):
+        s = s0 * (1.0 + 0.3 * np.sin(1e-3 * k * np.arange(1, n + 1)))
+        out[k] = (U * s) @ V.T
+        U, V = dU @ U, dV @ V
+    return carr(out)
+
+
+@pytest.mark.parametrize("n", (6, 12))
+def test_svd_right_sequence_on_a_drifting_sequence(rng, n):
+    """Started from the step before's vectors: every member within the Weyl bound of SciPy's σ,
+    its vectors eigenvectors of AᵀA and orthonormal to C n u at the end of 3,000 steps (the
+    start re-orthonormalised, so rounding does not build up); a sequence cut in two and
+    continued from the first part's last vectors, some of them negated (as the analysis'
+    sign-continuous vectors are), gives the same bits; a jumping batch of every SVD kind is
+    still right; a NaN member gives NaN there and the next starts again from the identity."""
+    A = drifting_sequence(rng, n, 3000)
+    S, Vt = linalg.svd_right_sequence(A, np.empty((0, 0)))
+    e = eps(n)
+    s_ref = np.linalg.svd(A, compute_uv=False)
+    for k in (0, 1, 1500, 2999):
+        assert_weyl(S[k], s_ref[k], 2 * e * s_ref[k, 0], f"step {k}")
+    assert np.all(np.abs(S - s_ref) <= 2 * e * s_ref[:, :1])
+    assert_orthonormal_columns(Vt[-1].T, n, "Vt at step 2999")
+    AtA = ld(A[-1]).T @ ld(A[-1])
+    for i in range(n):
+        v = ld(Vt[-1, i])
+        r = float(np.linalg.norm(np.asarray(AtA @ v - ld(S[-1, i]) ** 2 * v, dtype=float)))
+        assert r <= 4 * e * s_ref[-1, 0] ** 2, f"‖AᵀA v_{i} - σ² v_{i}‖ = {r:.3e}"
+    S1, Vt1 = linalg.svd_right_sequence(carr(A[:1234]), np.empty((0, 0)))
+    flip = np.where(np.arange(n) % 3 == 1, -1.0, 1.0)[:, None]
+    S2, Vt2 = linalg.svd_right_sequence(carr(A[1234:]), carr(Vt1[-1] * flip))
+    assert same_bits(np.concatenate([S1, S2]), S)
+    assert same_bits(np.abs(np.concatenate([Vt1, Vt2])), np.abs(Vt))
+    J = batch(rng, n, n)
+    SJ, VtJ = linalg.svd_right_sequence(J, np.empty((0, 0)))
+    for k, kind in enumerate(SVD_KINDS):
+        _, sj, _ = scipy.linalg.svd(J[k])
+        assert_weyl(SJ[k], sj, 2 * e * sj[0], f"{kind} after {SVD_KINDS[k - 1]}")
+        assert_orthonormal_columns(VtJ[k].T, n, f"{kind}, Vt")
+    bad = A[:20].copy()
+    bad[7, 0, 0] = np.nan
+    Sb, Vtb = linalg.svd_right_sequence(bad, np.empty((0, 0)))
+    assert np.isnan(Sb[7]).all() and np.isnan(Vtb[7]).all()
+    assert same_bits(Sb[:7], S[:7])
+    S8, _ = linalg.svd_right_sequence(carr(A[8:20]), np.empty((0, 0)))
+    assert same_bits(Sb[8:], S8)
 
 
 def differing(out: dict, ref: dict) -> list[str]:

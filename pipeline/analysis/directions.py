@@ -2,9 +2,8 @@
 
 Stage 1 (provenance) and stage 2 (per-direction SVD, eq. 26) of architecture §3. Γ is rebuilt at
 every step by the simulator's own kernels (``GiordanoRobot.gamma_matrices``) from q alone;
-nothing logged but q and v is trusted. The SVDs run batched, compiled, over slices of the log:
-singular values alone where only the provenance needs them, with the right-singular vectors
-in the analysis window.
+nothing logged but q and v is trusted. The SVDs run batched, compiled, over slices of the log,
+each started from the step before's right-singular vectors.
 """
 
 from __future__ import annotations
@@ -13,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.sim.linalg import svd_right
+from pipeline.sim.linalg import svd_right_sequence
 from pipeline.sim.robot import GiordanoRobot
 
 
@@ -49,10 +48,26 @@ class DirectionChunk:
     V_last: np.ndarray  # 12×12, sign-continuous right-singular vectors of the last step
 
 
-def project_chunk(gamma: np.ndarray, v: np.ndarray,
-                  V_prev: np.ndarray | None = None) -> DirectionChunk:
-    """Batched SVD of Γ_k = U S Vᵀ and y_i,k = u_iᵀ Γ_k v_k = σ_i (v_iᵀ v_k) (eq. 26)."""
-    s, Vt = svd_right(gamma)
+def singular_directions(gamma: np.ndarray, Vt_prev: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """σ and Vᵀ of each Γ_k (N×12×12 → N×12, N×12×12; eq. 26). Γ moves little from one
+    step to the next, so each SVD starts from the step before's right vectors (``Vt_prev``
+    across chunks, those of the chunk before's last step): the same bits whatever the chunks."""
+    start = np.empty((0, 0)) if Vt_prev is None else np.ascontiguousarray(Vt_prev)
+    return svd_right_sequence(np.ascontiguousarray(gamma), start)
+
+
+def project_directions(s: np.ndarray, Vt: np.ndarray, v: np.ndarray,
+                       V_prev: np.ndarray | None = None) -> DirectionChunk:
+    """y_i,k = u_iᵀ Γ_k v_k = σ_i (v_iᵀ v_k) from Γ_k = U S Vᵀ (eq. 26), the vectors made
+    sign-continuous from ``V_prev`` (the chunk before's last, or none)."""
     V = sign_continuous(np.swapaxes(Vt, 1, 2), V_prev)
     y = s * np.einsum("kji,kj->ki", V, v)
     return DirectionChunk(s, y, s[:, -1], s[:, 0] / s[:, -1], V[-1])
+
+
+def project_chunk(gamma: np.ndarray, v: np.ndarray,
+                  V_prev: np.ndarray | None = None) -> DirectionChunk:
+    """Batched SVD of Γ_k = U S Vᵀ and y_i,k = u_iᵀ Γ_k v_k = σ_i (v_iᵀ v_k) (eq. 26)."""
+    s, Vt = singular_directions(gamma, None if V_prev is None else V_prev.T)
+    return project_directions(s, Vt, v, V_prev)

@@ -17,7 +17,7 @@ import numpy as np
 
 from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
-from pipeline.analysis.directions import project_chunk, rebuild_gamma
+from pipeline.analysis.directions import project_directions, rebuild_gamma, singular_directions
 from pipeline.analysis.harm import harm, roll_smear
 from pipeline.analysis.schema import value_at
 from pipeline.analysis.verdict import judge, mode_loops
@@ -27,7 +27,6 @@ from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
 from pipeline.shapes import V
 from pipeline.sim.base_controller import block_gains, conditioning_scale
-from pipeline.sim.linalg import batched_singular_values
 from pipeline.sim.margins import Latency, period_steps, requirement_fixes, root_regime
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import (
@@ -44,7 +43,8 @@ from pipeline.spec import Spec
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", "u_applied",
             "attitude_excursion_deg", *LIMIT_FLAGS]
-PROVENANCE_TOL = 1e-10  # same kernels on the same q: 0 unless the log or the robot changed
+# The same Γ, its SVD started elsewhere than the simulator's: 1e-16 unless the log or robot changed.
+PROVENANCE_TOL = 1e-10
 
 
 @dataclass
@@ -296,18 +296,21 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
                         ) -> tuple[rs.Provenance, np.ndarray, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
     y (eq. 26), the singular values of Γ and the reduced velocity ν̆ = (Γ v)[3:] over the
-    window (singular vectors only there)."""
+    window. Every step's SVD starts from the step before's vectors (about half the sweeps of a
+    start from the identity), so the rebuilt σ_min differs from the simulator's (started from
+    the identity each step) by rounding alone, about 1e-16."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
-    ys, sigmas, nus, V_prev = [], [], [], None
+    ys, sigmas, nus, V_prev, Vt_last = [], [], [], None, None
     for chunk in _batches(log.iter_columns(["step", "q", "v", "s_min_G", "kappa_G"])):
         gamma = rebuild_gamma(robot, chunk["q"])
         keep = (chunk["step"] >= win.start) & (chunk["step"] < win.stop)
-        sigma = np.empty((len(gamma), gamma.shape[1]))
-        sigma[~keep] = batched_singular_values(gamma[~keep])
+        # Every step's SVD, each started from the step before's (one sequence over the log).
+        sigma, Vt = singular_directions(gamma, Vt_last)
+        if len(Vt):
+            Vt_last = Vt[-1]
         if keep.any():
-            part = project_chunk(gamma[keep], chunk["v"][keep], V_prev)
+            part = project_directions(sigma[keep], Vt[keep], chunk["v"][keep], V_prev)
             V_prev = part.V_last
-            sigma[keep] = part.sigma
             ys.append(part.y)
             sigmas.append(part.sigma)
             nus.append(np.einsum("kij,kj->ki", gamma[keep][:, 3:, :], chunk["v"][keep]))

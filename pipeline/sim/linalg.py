@@ -409,3 +409,64 @@ def svd_right(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         S[k] = s
         Vt[k] = vt
     return S, Vt
+
+
+@jit
+def _reorthonormalise_rows(P: np.ndarray) -> None:
+    """One Newton–Schulz step towards the nearest matrix with orthonormal rows, in place:
+    P ← P + ½ (I − P Pᵀ) P, which takes rows orthonormal to δ to rows orthonormal to O(δ²)."""
+    n = P.shape[0]
+    E = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            e = (1.0 if i == j else 0.0) - dot(P[i], P[j])
+            E[i, j] = e
+            E[j, i] = e
+    C = matmul(E, P)
+    for i in range(n):
+        for k in range(P.shape[1]):
+            P[i, k] += 0.5 * C[i, k]
+
+
+@jit
+def svd_right_sequence(A: np.ndarray, Vt0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """σ and Vᵀ of each square A[k] of a slowly varying sequence (N×n×n → N×n, N×n×n), as
+    :func:`svd_right`, each started from the right vectors of the one before: the first from
+    ``Vt0`` (the identity if ``Vt0`` is empty or not finite), a member after a non-finite one
+    from the identity.
+
+    One-sided Jacobi started from V_{k−1} rotates the columns of A_k V_{k−1}, which are
+    orthogonal but for A's change over a step, so it needs two or three sweeps where a start
+    from the identity needs seven or eight (the analysis' Γ over consecutive steps, eq. 26).
+    The start is made orthonormal again by one Newton–Schulz step first, so the rounding of
+    one member's rotations is not carried into the next."""
+    N, n = A.shape[0], A.shape[1]
+    S = np.empty((N, n))
+    Vt = np.empty((N, n, n))
+    start = np.eye(n)
+    if Vt0.shape[0] == n and _all_finite(Vt0):
+        start = Vt0.copy()
+        _reorthonormalise_rows(start)
+    for k in range(N):
+        if not _all_finite(A[k]):
+            S[k] = np.nan
+            Vt[k] = np.nan
+            start = np.eye(n)
+            continue
+        B = np.empty((n, n))  # rows (A_k v_i)ᵀ: the columns of A_k V_start
+        for i in range(n):
+            for r in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += A[k, r, c] * start[i, c]
+                B[i, r] = acc
+        W = start.copy()
+        _orthogonalise_rows(B, W)
+        norms = _row_norms(B)
+        order = _descending(norms)
+        for c in range(n):
+            S[k, c] = norms[order[c]]
+            Vt[k, c] = W[order[c]]
+        start = Vt[k].copy()
+        _reorthonormalise_rows(start)
+    return S, Vt
