@@ -28,6 +28,12 @@ ROW_SCALARS = ("s_min_G", "kappa_G", "s_min_J", "kappa_J", "gamma", "dt_mu_max",
 SCALAR_COLUMNS = ("t", "tau", *ROW_SCALARS)
 
 
+# Each arm joint's excess beyond its range and the flag of a step with any (eq. 42): written
+# beside the kernel's row from the logged q (pipeline.joint_ranges), not by the kernel.
+JOINT_EXCESS = "joint_excess"
+OUTSIDE_JOINT_RANGE = "outside_joint_range"
+
+
 def limit_flags(shape: RobotShape) -> tuple[str, ...]:
     """The limit flags of a log of ``shape``, in the row's order (eq. 16)."""
     return LIMIT_FLAGS + (NULL_SPACE_FLAGS if shape.null_space_dim else ())

@@ -129,8 +129,9 @@ class RobotShape:
         ``qdot.<joint>`` for v; ``<column>.f_b.x``, ``<column>.tau_b.z``, ``<column>.<joint>``
         for a generalised force (u_cmd, u_applied: the dual of v); ``<column>.<block>.<axis>``
         for the reduced velocity's blocks (v_breve, v_breve_des, eq. 10) and the task error's
-        (x_tilde, eq. 14), and ``v_c.<axis>`` for the CoM velocity. A KeyError for a column
-        it does not know."""
+        (x_tilde, eq. 14), ``v_c.<axis>`` for the CoM velocity and ``joint_excess.<joint>``
+        for each joint's excess beyond its range (eq. 42). A KeyError for a column it does not
+        know."""
         if column == "q":
             return (*_axes("p_b"), *(f"quat_tb.{c}" for c in "xyzw"),
                     *(f"q.{j}" for j in self.joints))
@@ -148,6 +149,8 @@ class RobotShape:
                          for label in _axes(f"{column}.{block}"))
         if column == "v_c":
             return _axes("v_c")
+        if column == "joint_excess":  # eq. 42: one per arm joint
+            return tuple(f"{column}.{j}" for j in self.joints)
         raise KeyError(f"no labels for a vector column {column!r}")
 
 

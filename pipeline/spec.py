@@ -93,7 +93,7 @@ class RobotSpec(_Block):
     file: str = "robots/seed_ur3_box.xml"
     camera_frame: str = "camera"
     # The seed robot's inspection reach (specs/nominal.yaml says why).
-    q_bar: list[Finite] = Field(default=[0.0, -0.367, -1.763, -0.993, -5.95, 0.0])
+    q_bar: list[Finite] = Field(default=[1.328, 0.512, -1.974, -0.196, -4.683, -2.543])
     damped_inverse: DampedInverse = DampedInverse()
     bus_inertia_scale: Positive = 1.0
     # Where package:// mesh URIs of a URDF are looked for (relative: to the spec's folder), for

@@ -232,9 +232,11 @@ def test_the_committed_tolerances_cover_every_baseline_and_column_and_say_how():
     assert data["reason"] and data["measured"]["date"] and data["measured"]["platform_key"]
     assert data["method"]["safety_factor"] == SAFETY_FACTOR
     assert any(m.startswith("ulp:") for m in data["method"]["ensemble"])
-    # The unstable nominal loop amplifies a last bit until a saturation binds: its velocity
-    # tolerance is orders of magnitude above the stable missions'.
-    assert table["baseline_nominal"]["v"] > 1e3 * table["baseline_dt010"]["v"]
+    # Every column of every baseline carries a measured tolerance of its own (above). How
+    # large the unstable nominal's is depends on its trajectory: 1.6e-2 in v from the posture
+    # before issue 50, whose opening slew let a nudge move the cycle's phase; 3.6e-12 from the
+    # in-range posture, where the ω_b cycle sits on the acceleration bound from step 4 and the
+    # clip erases a nudge (docs/reproducibility.md). So no ordering is asserted here.
 
 
 def test_the_tolerance_rule():

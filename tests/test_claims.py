@@ -344,6 +344,7 @@ def test_ci_register_is_the_same_claims_on_short_missions():
         "sampled_delay_dt010": "short_omega_ripple_sampled_delay_dt010",
         "sampled_delay": "short_omega_ripple_sampled_delay",
         "sampled_torque": "short_omega_ripple_sampled_torque",
+        "sampled_torque_imex": "short_omega_ripple_sampled_torque_imex",
         # The fixes are 30 s missions already.
         "fix_imex": "omega_ripple_sampled_imex", "fix_dt": "omega_ripple_sampled_dt0075",
         "fix_gains": "omega_ripple_sampled_gains",

@@ -114,7 +114,7 @@ def distinct_step(mission):
              "derate_gain": 1.0, "imex": 0.0, "k_posture": 0.37, "k_null": 0.27,
              "acc_bounds": [0.031, 0.052, 0.073], "rate_bounds": [0.0041, 0.0062, 0.0083],
              "com_K": 0.21, "com_D": 0.43, "com_Ki": 0.057, "com_i_max": 1.1e-5,
-             "v_c_acc": 7.1e-4, "v_c_rate": 0.0123, "v_max": 0.0131,
+             "v_c_acc": 7.1e-4, "v_c_rate": 0.0123, "v_max": 0.0021,
              "ramp_low": 0.5 * T.s_min_G, "ramp_high": 2.1 * T.s_min_G, "ramp_floor": 0.29,
              "inverse_floor": 1.7 * T.s_min_J, "inverse_damping": 0.047}
     state = {"q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve, "tau": s.tau,

@@ -75,7 +75,7 @@ def test_the_cycle_finder_finds_a_cycle():
 LAYERS = (
     ("errors", "atomic_files", "bounded_read", "paths", "artefact_paths", "log_layout",
      "shapes", "yamlfile", "version", "progress", "provenance", "platform", "orphans"),
-    ("spec", "budget"),
+    ("spec", "budget", "joint_ranges"),
     ("logs",),
     ("sim", "importer"),
     ("analysis",),

@@ -247,11 +247,12 @@ def test_the_representative_step_matches_mujoco(peer_run):
 def test_the_peer_sees_the_old_seed_camera(monkeypatch):
     """The peer can fail: on the seed file before issue 22 (the camera site inside the
     jointless payload), Pinocchio's Γ and M̆, the loader's cross-parse bypassed, are those of
-    another camera than MuJoCo's: at the nominal q̄, σ_min(Γ) 0.1 % and M̆ 79 % away (round-off
-    is 1e-14)."""
+    another camera than MuJoCo's: at the nominal q̄ of that time, σ_min(Γ) 0.1 % and M̆ 79 %
+    away (round-off is 1e-14)."""
     old = PROJECT_ROOT / "tests" / "fixtures" / "seed_ur3_box_issue2534.xml"
     monkeypatch.setattr(robot_file, "crosscheck_robot_file", lambda *a: None)
-    spec = with_overrides(load_spec("nominal"), {"robot.file": str(old)})
+    spec = with_overrides(load_spec("nominal"), {
+        "robot.file": str(old), "robot.q_bar": [0.0, -0.367, -1.763, -0.993, -5.95, 0.0]})
     robot = GiordanoRobot(spec)
     q = robot.deterministic_q_init()
     T = robot.terms(q, np.zeros(12))

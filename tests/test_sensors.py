@@ -123,10 +123,13 @@ def test_gyro_noise_through_a_damping_mode_is_the_closed_forms_ar1():
 def test_a_plant_driven_past_its_numbers_ends_failed_not_crashed():
     """Gyro noise of 0.3 rad/√s (1.7 rad/s a sample at dt 0.03 s) fed back drives the seed
     robot's arm until the compiled dynamics divide by zero: the run ends ``failed`` at that
-    step, naming the error, as a non-finite state does; it does not crash the caller."""
+    step, naming the error, as a non-finite state does; it does not crash the caller. From the
+    seed missions' posture before issue 50 (its opening slew is where the noise takes the arm
+    over; from today's in-range posture the same noise is ridden out for 20 s)."""
     seed = int(np.random.SeedSequence([40, 7, 7]).generate_state(1)[0])
     spec = with_overrides(load_spec("omega_ripple_sampled"), {
-        "mission.duration": 20.0, "mission.plant.sensors": {"gyro_arw": 0.3, "seed": seed}})
+        "mission.duration": 20.0, "mission.plant.sensors": {"gyro_arw": 0.3, "seed": seed},
+        "robot.q_bar": [0.0, -0.367, -1.763, -0.993, -5.95, 0.0]})
     res = Mission(spec).run()
     assert res.status in ("failed", "diverged"), res.status
     assert res.status == "diverged" or res.error

@@ -21,6 +21,7 @@ import numpy as np
 
 from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
+from pipeline.analysis.joint_ranges import joint_range_record
 from pipeline.analysis.stages import (
     bus_rate_data,
     choose_window,
@@ -30,6 +31,8 @@ from pipeline.analysis.stages import (
 )
 from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import SpecError
+from pipeline.joint_ranges import JointRanges
+from pipeline.log_layout import JOINT_EXCESS, OUTSIDE_JOINT_RANGE
 from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, VerifiedLog
 from pipeline.provenance.keys import analysis_version, file_digest
 from pipeline.shapes import V
@@ -39,7 +42,8 @@ from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.stability import mode_fixes, mode_stiffness
 from pipeline.spec import Spec
 
-IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J"]
+IMPORTED_COLUMNS = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", JOINT_EXCESS,
+                    OUTSIDE_JOINT_RANGE]
 UNDECLARED = "undeclared"
 
 
@@ -112,6 +116,7 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         conditioning=conditioning_along(log, robot.floor),
         damping=damping, prediction=prediction,
         versions=log.meta.versions or {},
+        joint_ranges=joint_range_record(log, JointRanges.of(robot.model), dt),
     )
 
 

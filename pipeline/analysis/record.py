@@ -45,8 +45,9 @@ from pipeline.errors import LogError
 # modes' stability checked against the map's (Prediction.theory_consistent); /7: a lag-1 and
 # the dominant step-energy share may be null, undetermined (a series without motion); the
 # record holds no NaN (it is written as strict JSON); /8: record_sha256, the record's own content
-# hash, checked on reading; an imported log's provenance absent where the import rebuilt its σ.
-SCHEMA = "breve-analysis/8"
+# hash, checked on reading; an imported log's provenance absent where the import rebuilt its σ;
+# /9: joint_ranges, the run's time outside the arm's joint ranges (eq. 42).
+SCHEMA = "breve-analysis/9"
 CONTENT_KEY = "record_sha256"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE

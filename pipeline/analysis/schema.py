@@ -213,6 +213,30 @@ class Metrics:
 
 
 @dataclass(frozen=True)
+class JointExcursion:
+    """One arm joint's time beyond one side of its range over the whole log (eq. 42)."""
+
+    joint: str
+    side: str  # "above" its upper limit or "below" its lower
+    limit: float  # the limit it passed (rad)
+    max_excess: float  # the largest |e_j| on that side (rad)
+    steps: int
+    seconds: float
+    first_step: int
+
+
+@dataclass(frozen=True)
+class JointRangeRecord:
+    """Whether the run left the arm's joint ranges (eq. 42), over every logged step."""
+
+    left: bool
+    steps_outside: int
+    seconds_outside: float
+    max_excess: float  # the largest |e| of any joint (rad), 0 inside
+    joints: list[JointExcursion]
+
+
+@dataclass(frozen=True)
 class BusMode:
     dt_mu_bus: float
     critical_I_zz: float
@@ -299,6 +323,7 @@ class CompleteRecord(Identity):
     bus_mode: BusMode
     mu_max_log: MuMaxAlong
     modes_along: ModesAlong
+    joint_ranges: JointRangeRecord
     comparison: Comparison | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     directions_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
@@ -328,6 +353,7 @@ class DivergedRecord(Identity):
     note: str
     provenance: Provenance
     divergence: Divergence
+    joint_ranges: JointRangeRecord
     theory: Theory
     robot: RobotCard
     directions_sha256: str | None = None
@@ -409,6 +435,7 @@ class ImportedRecord(Identity):
     damping: DampingTheory | None
     prediction: Prediction | None
     versions: dict[str, str]
+    joint_ranges: JointRangeRecord
     directions_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 

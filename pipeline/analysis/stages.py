@@ -19,10 +19,12 @@ from pipeline.analysis import schema as rs
 from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_directions, rebuild_gamma, singular_directions
 from pipeline.analysis.harm import harm, roll_smear
+from pipeline.analysis.joint_ranges import joint_range_record
 from pipeline.analysis.schema import value_at
 from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import CheckFailed, LogError, SpecError
-from pipeline.log_layout import LIMIT_FLAGS, limit_flags
+from pipeline.joint_ranges import JointRanges
+from pipeline.log_layout import JOINT_EXCESS, LIMIT_FLAGS, OUTSIDE_JOINT_RANGE, limit_flags
 from pipeline.logs import VerifiedLog
 from pipeline.provenance.keys import analysis_version
 from pipeline.shapes import V
@@ -42,7 +44,7 @@ from pipeline.spec import Spec
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", "u_applied",
-            "attitude_excursion_deg", *LIMIT_FLAGS]
+            "attitude_excursion_deg", *LIMIT_FLAGS, JOINT_EXCESS, OUTSIDE_JOINT_RANGE]
 # The same Γ, its SVD started elsewhere than the simulator's: 1e-16 unless the log or robot changed.
 PROVENANCE_TOL = 1e-10
 
@@ -135,7 +137,8 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
 
     # The window's columns, but not q and x̃: stages 1–4 read those by row group or by step.
     flags = limit_flags(robot.shape)
-    cols = log.columns([*(c for c in REQUIRED if c not in ("x_tilde", "kappa_G", *flags)),
+    skip = ("x_tilde", "kappa_G", JOINT_EXCESS, OUTSIDE_JOINT_RANGE, *flags)
+    cols = log.columns([*(c for c in REQUIRED if c not in skip),
                         *flags], win.start, win.stop)
     rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
     th = theory_at_step(robot, spec, log, win.start + rep.index)
@@ -173,6 +176,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         bus_mode=rs.BusMode(dt_mu_bus=dt * card.mu_bus, critical_I_zz=dt * card.D_b / 2),
         mu_max_log=mu_max_along(log, dt, card.mu_bus, robot.floor),
         modes_along=fastest_modes_along(robot, spec, log),
+        joint_ranges=joint_range_record(log, JointRanges.of(robot.model), dt),
     )
 
 
@@ -276,6 +280,7 @@ def divergence_record(log: VerifiedLog) -> rs.DivergedRecord:
             fit_steps=[int(fit[0]), int(fit[-1]) + 1], alternating=alternating,
             growth_factor=factor, predicted=sim, predicted_note_order=note,
             ratio=factor / sim, ratio_note_order=factor / note),
+        joint_ranges=joint_range_record(log, JointRanges.of(robot.model), spec.mission.dt),
         theory=th.record,
         robot=robot.card(th.q),
     )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pipeline.analysis.joint_ranges import excursion_words
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord
 from pipeline.analysis.verdict import ModeLoop, Prediction, measured_words
 
@@ -47,13 +48,15 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
     """What ``analyze`` prints of a record written to ``path``: the headline numbers, and for
     a comparison what it compares (:func:`basis_lines`)."""
     if isinstance(record, ImportedRecord):
-        return imported_lines(record, path)
+        return [*imported_lines(record, path),
+                f"  joint ranges: {excursion_words(record.joint_ranges)}"]
     if not isinstance(record, CompleteRecord):
         g = record.divergence
         return [f"{record.spec_name}: {record.note}; ω_b grows by "
                 f"{g.growth_factor:+.4g} per step over steps {g.fit_steps[0]}–"
                 f"{g.fit_steps[1]}, Φ predicts {g.predicted:+.4g} (simulator's order; "
-                f"{g.predicted_note_order:+.4g} under the note's) -> {path}"]
+                f"{g.predicted_note_order:+.4g} under the note's) -> {path}",
+                f"  joint ranges: {excursion_words(record.joint_ranges)}"]
     th, dom = record.theory, record.dominant
     lines = [f"{record.spec_name}: dominant lag-1 {_lag(dom.lag1)} (σ {dom.sigma:.3g}), "
              f"dt·μ_max {th.dt_mu_max:.3g}, dt*_damping {th.dt_star_damping:.4g} s, "
@@ -62,6 +65,7 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
              f"|cos| {record.alignment.abs_cos:.3f}, median ‖Δv‖ "
              f"{record.velocity_jump.median:.3g} (m/s, rad/s mixed), provenance "
              f"{record.provenance.max_abs_s_min_G:.1e} -> {path}"]
+    lines.append(f"  joint ranges: {excursion_words(record.joint_ranges)}")
     lines += mode_lines(th.modes, record.prediction, th.plant, th.delay_steps)
     if th.latency is not None:  # the command arriving within the step (eq. 41)
         lat = th.latency

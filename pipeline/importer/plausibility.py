@@ -22,9 +22,9 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
+from pipeline.joint_ranges import UNLIMITED
 
 LIMIT_MARGIN_RAD = 1.0
-UNLIMITED = 1e10  # a limit beyond this is none (Pinocchio's default for an unbounded joint)
 
 
 def check_joint_limits(model: pin.Model, q: np.ndarray, angle_unit: str, source: Path) -> None:

@@ -36,6 +36,8 @@ from pipeline.importer.mapping import ImportMapping, import_spec, robot_block
 from pipeline.importer.plausibility import check_joint_limits
 from pipeline.importer.readers import READERS, RawLog, read_bytes
 from pipeline.importer.timebase import TimeBase, even_time_base, resample
+from pipeline.joint_ranges import JointRanges, outside
+from pipeline.log_layout import JOINT_EXCESS, OUTSIDE_JOINT_RANGE
 from pipeline.logs import S_MIN_G_REBUILT, S_MIN_G_SOURCE, LogMeta, log_metadata, write_table
 from pipeline.paths import display_path
 from pipeline.provenance.keys import (
@@ -153,8 +155,10 @@ def write_import(prep: PreparedImport, path: Path) -> ImportOutcome:
                    robot_hash=file_digest(spec.robot_path), status="complete",
                    failed_step=None, error="", rows=n,
                    versions=library_versions(SIM_LIBRARIES), imported=record)
+    excess = JointRanges.of(prep.model_robot.model).excess(q)  # eq. 42, as a run's log
     columns = {"step": np.arange(n, dtype=np.int64), "t": np.arange(n) * time.dt, "q": q,
-               "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)}}
+               "v": v, **{c: sigma[:, i] for i, c in enumerate(SIGMA_COLUMNS)},
+               JOINT_EXCESS: excess, OUTSIDE_JOINT_RANGE: outside(excess)}
     write_table(path, columns, log_metadata(meta))
     return ImportOutcome.of_record(path, n, record, reused=False)
 

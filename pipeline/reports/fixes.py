@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pipeline.analysis.joint_ranges import range_mark
 from pipeline.analysis.schema import CompleteRecord
 from pipeline.reports.figures import RunData
 
@@ -202,7 +203,8 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                                              for m, _ in ringing)
                    + f" ring over {ringing[0][1].measured.period_steps:.3g} steps"
                    + (f", held by {', '.join(sorted(held))}" if held else "")
-                   + f"; theory and data {'agree' if bad.agrees else 'DISAGREE'} mode by mode.")
+                   + f"; theory and data {'agree' if bad.agrees else 'DISAGREE'} mode by mode."
+                   + range_mark(bad.run, rec.joint_ranges))
         fixes = sorted(t.fixes, key=lambda r: (r.steps_per_s, -r.gain_margin_db))
         if fixes:
             f = fixes[0]
@@ -212,7 +214,8 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                    + (f"{f.phase_margin_deg:.3g}°, " if f.phase_margin_deg is not None else "")
                    + f"{f.delay_margin_ms:.3g} ms), flown clean, at {f.steps_per_s:.4g} steps "
                    f"per second ({f.steps_per_s / bad.steps_per_s:.3g}× {bad.run}'s)"
-                   + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + ".")
+                   + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + "."
+                   + range_mark(f.run, by_name[f.run].record.joint_ranges))
         else:
             fix = f"No flown run of this loop meets {t.requirement}: see the fix table."
         out.append(Decision(robot, verdict, "Severity: " + severity(

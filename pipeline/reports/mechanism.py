@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from pipeline.analysis.joint_ranges import excursion_words, range_mark
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
 from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
 from pipeline.reports.figures import RunData, against_log
@@ -70,7 +71,15 @@ def recommended(th: Theory) -> str:
 
 
 def verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
-    """The headline, from the modes of the loop as flown judged one by one (eqs. 35, 36)."""
+    """The headline, from the modes of the loop as flown judged one by one (eqs. 35, 36),
+    marked where either run left a joint range (eq. 42)."""
+    v = _verdict(run, other)
+    mark = (range_mark(run.spec_name, run.joint_ranges)
+            + range_mark(other.spec_name, other.joint_ranges))
+    return Verdict(v.kind, v.headline + mark) if mark else v
+
+
+def _verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
     th, p = run.theory, run.prediction
     unstable = [m for m in th.modes if m.rings]
     if p.theory_consistent is False:
@@ -188,6 +197,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),
         "modes": th.modes, "prediction": rec.prediction, "requirement": th.requirement,
         "severity": severity(rec, run.spec), "recommended": recommended(th),
+        "ranges": [(r.spec_name, excursion_words(r.joint_ranges)) for r in (rec, other)],
         "plant_words": th.update_order,
         "note_rows": table, "note_labels": names, "note_differences": differences(table),
         "fmt": fmt, "versions": versions,

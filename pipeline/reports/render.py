@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 from pathlib import Path
 
+from pipeline.analysis.joint_ranges import excursion_words
 from pipeline.analysis.record import read_analysis
 from pipeline.analysis.schema import DivergedRecord, ImportedRecord
 from pipeline.artefact_paths import ANALYSIS_FILE, CLAIMS_FILE, IMPORTED_FOLDER
@@ -71,13 +72,27 @@ def load_imported(out: Path) -> list[fg.RunData]:
     return runs
 
 
+def joint_range_rows(runs: list[fg.RunData]) -> list[dict]:
+    """Each analysed run's time outside its joint ranges (eq. 42), with the spectral radius of
+    its loop's map where it has one: a run that left a range is marked, and whether its loop
+    is stable by its own map says whether the instability can be what drove it out."""
+    rows = []
+    for r in runs:
+        th = getattr(r.record, "theory", None) or getattr(r.record, "damping", None)
+        rho = getattr(th, "spectral_radius", None)
+        rows.append({"name": r.name, "folder": r.folder, "left": r.record.joint_ranges.left,
+                     "rho": rho, "words": excursion_words(r.record.joint_ranges)})
+    return rows
+
+
 def render_imported(out: Path, runs: list[fg.RunData]) -> list[Path]:
     """One page per imported log (``imported/<name>/imported.{md,html}``): its origin, what
     the data say, the declared controller's theory if any, and which stages ran and why."""
     written = []
     for r in runs:
         ctx = {"rec": r.record, "o": r.record.origin, "code_version": report_version(),
-               "log_missing": r.log is None}
+               "log_missing": r.log is None,
+               "ranges": excursion_words(r.record.joint_ranges)}
         written += [render("imported.md.j2", out / r.folder / "imported.md", **ctx),
                     render("imported.html.j2", out / r.folder / "imported.html", **ctx)]
     return written
@@ -401,6 +416,7 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
                       "ci/CLAIMS.md", "ci/claims.json")
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
+                   ranges=joint_range_rows([*runs, *imported]),
                    imported=imported, tables=tables, decisions=decisions(runs),
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,

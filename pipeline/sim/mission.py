@@ -24,7 +24,14 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from pipeline.log_layout import SCALAR_COLUMNS, limit_flags, vector_columns
+from pipeline.joint_ranges import JointRanges, outside
+from pipeline.log_layout import (
+    JOINT_EXCESS,
+    OUTSIDE_JOINT_RANGE,
+    SCALAR_COLUMNS,
+    limit_flags,
+    vector_columns,
+)
 from pipeline.logs import ROW_GROUP, concat_columns
 from pipeline.shapes import Q
 from pipeline.sim.base_controller import block_gains, conditioning_scale
@@ -112,6 +119,7 @@ class Mission:
         self.robot = robot or GiordanoRobot(spec)
         check_null_space(spec, self.robot.shape)
         check_posture_limits(spec, self.robot.model)
+        self.ranges = JointRanges.of(self.robot.model)  # flagged in the log (eq. 42)
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self.layout: StepLayout = step_layout(self.robot.shape)
@@ -310,7 +318,7 @@ class Mission:
         nxt = LoopState(q=f["q"], v=f["v"], v_c=f["v_c"], v_breve=f["v_breve"],
                         tau=float(f["tau"][0]), integral=f["integral"],
                         v_breve_des_prev=f["v_breve_des_prev"])
-        cols = log_columns(layout, rows)
+        cols = log_columns(layout, rows, self.ranges)
         return nxt, {name: value[0] for name, value in cols.items() if name not in ("t", "step")}
 
     def run(self, progress: bool = False,
@@ -334,8 +342,8 @@ class Mission:
 
         def flush(count: int) -> None:
             # Copies: the buffer is reused for the next chunk.
-            out({k: np.array(v) for k, v in log_columns(layout, rows[:count], self.dt,
-                                                        first).items()})
+            out({k: np.array(v) for k, v in log_columns(layout, rows[:count], self.ranges,
+                                                        self.dt, first).items()})
 
         def result(status: str, rows_logged: int, step: int | None = None,
                    error: str = "") -> MissionResult:
@@ -400,16 +408,19 @@ class Mission:
         return result("complete", n)
 
 
-def log_columns(layout: StepLayout, rows: np.ndarray, dt: float = 0.0, first: int = 0
-                ) -> dict[str, np.ndarray]:
+def log_columns(layout: StepLayout, rows: np.ndarray, ranges: JointRanges, dt: float = 0.0,
+                first: int = 0) -> dict[str, np.ndarray]:
     """The log's columns (architecture §6, in the log's order) from the kernel's rows
-    (``layout.row_fields``) of steps ``first``, ``first`` + 1, …; t = step·dt."""
+    (``layout.row_fields``) of steps ``first``, ``first`` + 1, …; t = step·dt; and each arm
+    joint's excess beyond its range with the step's flag (eq. 42)."""
     at = layout.row
     step = np.arange(first, first + len(rows), dtype=np.int64)
     cols = {c: rows[:, at[c]] for c in vector_columns(layout.shape)}
     cols |= {c: (step * dt if c == "t" else rows[:, at[c].start]) for c in SCALAR_COLUMNS}
     flags = at["limit_flags"].start
     cols |= {c: rows[:, flags + i] > 0.5 for i, c in enumerate(limit_flags(layout.shape))}
+    cols[JOINT_EXCESS] = ranges.excess(cols["q"])
+    cols[OUTSIDE_JOINT_RANGE] = outside(cols[JOINT_EXCESS])
     cols["step"] = step
     return cols
 

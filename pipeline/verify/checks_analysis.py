@@ -276,6 +276,38 @@ def _sensors() -> Outcome:
                    f"σ = {arw / math.sqrt(dt):.3g} rad/s")
 
 
+@check("42", "each joint's excess beyond its range vs an element-by-element loop over the "
+       "ranges MuJoCo reads from the same robot file (a second parser); the flag vs any",
+       "pipeline.joint_ranges.JointRanges.excess")
+def _joint_excess() -> Outcome:
+    import mujoco
+
+    from pipeline.joint_ranges import JointRanges, outside
+    from pipeline.verify.checks_base import robot
+
+    r = robot()
+    mj = mujoco.MjModel.from_xml_path(str(check_spec().robot_path))
+    ranges = {mj.joint(j).name: tuple(mj.jnt_range[j]) for j in range(mj.njnt)
+              if mj.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and mj.jnt_limited[j]}
+    names = list(r.model.names)[2:]
+    g = rng(42)
+    q = np.tile(r.full_configuration(r.q_bar), (200, 1))
+    q[:, 7:] = g.uniform(-7.0, 7.0, (200, len(names)))  # either side of each range
+    got = JointRanges.of(r.model).excess(q)
+    diffs, flags = [], 0
+    for k in range(len(q)):
+        any_out = False
+        for j, name in enumerate(names):
+            lo, hi = ranges.get(name, (-math.inf, math.inf))
+            x = q[k, 7 + j]
+            want = x - hi if x > hi else x - lo if x < lo else 0.0
+            any_out = any_out or want != 0.0
+            diffs.append(abs(got[k, j] - want))
+        flags += int(any_out != bool(outside(got[k:k + 1])[0]))
+    return Outcome("200 configurations of the check robot, each joint uniform on [−7, 7] rad",
+                   max(diffs) + flags, 0.0, f"{flags} flags differ")
+
+
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
 # :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
@@ -291,4 +323,5 @@ CHECKS = (
     _confidence,
     _dispersed_inertia,
     _sensors,
+    _joint_excess,
 )
