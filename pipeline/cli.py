@@ -7,6 +7,7 @@ This is the one place where the pipeline's error kinds become exit codes.
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import subprocess
 import sys
@@ -59,7 +60,7 @@ def _cmd_analyze(a: argparse.Namespace) -> int:
     log = store.open_log(a.log)
     other = store.open_log(a.against) if a.against else None
     done = store.analysis(log, other, a.window_start, force=a.force, quiet=True,
-                          controller=controller)
+                          controller=controller, s_min_G_target=a.at_s_min_G)
     if done.reused:
         print(f"{log.spec.name}: up to date (same log and analysis code) -> "
               f"{display_path(done.path)}")
@@ -342,6 +343,17 @@ def _formatter(prog: str) -> argparse.HelpFormatter:
     return _StageFormatter(prog, max_help_position=32, width=100)
 
 
+def _sigma(text: str) -> float:
+    """A singular value to aim at: a finite number above 0."""
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise argparse.ArgumentTypeError(f"{text}: give a finite σ above 0")
+    return x
+
+
 def _sample_count(text: str) -> int:
     """A count of samples: a whole number of at least 1 (argparse's one-line error, exit 2)."""
     try:
@@ -449,6 +461,11 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--window-start", type=float, default=None, metavar="SECONDS",
                     help="analysis window start in seconds, to the end of the log "
                     "(default: half the mission; e.g. --window-start 30)")
+    an.add_argument("--at-s-min-G", type=_sigma, default=None, metavar="SIGMA",
+                    dest="at_s_min_G",
+                    help="take the theory at the window's step of σ_min(Γ) nearest SIGMA "
+                    "instead of the median's: the seed note's regime is 0.032 (default: the "
+                    "median; e.g. --at-s-min-G 0.032)")
     an.add_argument("--force", action="store_true",
                     help="analyse even when the record is current: same logs and analysis "
                     "code (default: off; e.g. --force)")

@@ -306,7 +306,7 @@ def _analysis() -> None:
     batched_singular_values(gamma[np.array([True, False])])
     svd_right(gamma)
     _, Vt = svd_right_sequence(gamma[np.array([True, False])], np.empty((0, 0)))
-    svd_right_sequence(gamma[np.array([False, True])], np.ascontiguousarray(Vt[-1].T))
+    svd_right_sequence(gamma[np.array([False, True])], np.ascontiguousarray(Vt[-1]))
 
 
 def _plant() -> None:

@@ -334,9 +334,12 @@ def test_ci_register_is_the_same_claims_on_short_missions():
     full = load_claims(SHIPPED_SPECS / "claims.yaml")
     ci = load_claims(SHIPPED_SPECS / "claims_ci.yaml")
     assert full.claims == ci.claims
+    # The note's regime is taken by the same rule in both (issue 50).
+    assert all(full.runs[n].at_s_min_G == ci.runs[n].at_s_min_G for n in full.runs)
     assert {n: r.spec for n, r in ci.runs.items()} == {
         "nominal": "short_nominal", "dt010": "short_omega_ripple_dt010",
         "imex": "short_omega_ripple_imex", "reach": "short_omega_ripple_reach",
+        "reach_dt010": "short_omega_ripple_reach_dt010",
         "unbounded": "omega_ripple_unbounded", "servicer": "short_servicer_nominal",
         "servicer_dt010": "short_servicer_dt010", "servicer_imex": "short_servicer_imex",
         "sampled": "short_omega_ripple_sampled",

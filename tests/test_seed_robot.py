@@ -322,10 +322,19 @@ def test_note_table_puts_the_note_beside_our_values():
         "simulator's update order (q moves with the updated velocity)": -2.926}
     assert rows["abs_cos"].cells[0].note is None and rows["abs_cos"].cells[0].rel_diff is None
     assert rows["provenance"].cells[0].ours is None  # not in this record: shown as —
-    # The mechanism report shows the table for the note's own pair only (it reads the names).
+    # The note's regime (issue 50): a reach column is compared with the note's nominal one.
+    reach = {"spec_name": "omega_ripple_reach", "theory": {"dt_mu_max": 3.9}}
+    rows = {r.key: r for r in note_table(note, {"nominal": rec, "reach": reach})}
+    cell = next(c for c in rows["dt_mu_max"].cells if c.column == "reach")
+    assert (cell.note, cell.ours) == (3.84, 3.9)
+    # The mechanism report shows the table for the note's own pair only (it reads the names),
+    # with the note's regime when its runs are among the others.
+    from pipeline.reports.mechanism import note_records
+
     name = SimpleNamespace
-    assert note_rows(name(**rec), name(**other))
-    assert not note_rows(name(**rec), name(**{**other, "spec_name": "other"}))
+    got = note_records(name(**rec), name(**other), [])
+    assert set(got) == {"nominal", "dt010"} and note_rows(got)
+    assert not note_records(name(**rec), name(**{**other, "spec_name": "other"}), [])
 
 
 @pytest.mark.slow

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.analysis import schema as rs
-from pipeline.errors import LogError
+from pipeline.errors import CheckFailed, LogError
 from pipeline.joint_ranges import JointRanges, outside
 from pipeline.log_layout import JOINT_EXCESS, OUTSIDE_JOINT_RANGE
 from pipeline.logs import VerifiedLog
@@ -24,14 +24,20 @@ def joint_range_record(log: VerifiedLog, ranges: JointRanges, dt: float) -> rs.J
     outside_steps = 0
     for chunk in log.iter_columns(list(COLUMNS)):
         e = ranges.excess(chunk["q"])
+        if np.isnan(e).any():  # a complete log's q is finite (verify_log): this is not one
+            raise LogError(f"{log.path}: q is not finite at step "
+                           f"{int(chunk['step'][np.argmax(np.isnan(e).any(axis=1))])}")
         flag = outside(e)
-        if not (np.array_equal(e, chunk[JOINT_EXCESS], equal_nan=True)
-                and np.array_equal(flag, chunk[OUTSIDE_JOINT_RANGE])):
-            bad = np.flatnonzero(np.any(e != chunk[JOINT_EXCESS], axis=1)
-                                 | (flag != chunk[OUTSIDE_JOINT_RANGE]))
-            at = int(chunk["step"][bad[0]]) if bad.size else int(chunk["step"][0])
-            raise LogError(f"{log.path}: {JOINT_EXCESS}/{OUTSIDE_JOINT_RANGE} at step {at} are "
-                           f"not those of the logged q and the robot file's ranges (eq. 42)")
+        logged, logged_flag = chunk[JOINT_EXCESS], chunk[OUTSIDE_JOINT_RANGE]
+        if logged.shape != e.shape:
+            raise CheckFailed(f"{log.path}: {JOINT_EXCESS} has {logged.shape[-1]} columns for "
+                              f"the robot file's {e.shape[1]} arm joints (eq. 42)")
+        differs = np.any(e != logged, axis=1) | (flag != logged_flag)
+        if differs.any():
+            at = int(chunk["step"][np.argmax(differs)])
+            raise CheckFailed(f"{log.path}: {JOINT_EXCESS}/{OUTSIDE_JOINT_RANGE} at step {at} "
+                              f"are not those of the logged q and the robot file's ranges "
+                              f"(eq. 42)")
         outside_steps += int(flag.sum())
         for side, mask in enumerate((e > 0.0, e < 0.0)):
             size = np.where(mask, np.abs(e), 0.0)
@@ -53,24 +59,30 @@ def joint_range_record(log: VerifiedLog, ranges: JointRanges, dt: float) -> rs.J
 
 def excursion_words(r: rs.JointRangeRecord) -> str:
     """One line for the CLI and the reports: inside every range, or which joint left which
-    side, by how much, for how long and from when."""
+    side, by how much, on how many steps in all and first when."""
     if not r.left:
-        return "inside every joint range (eq. 42)"
-    parts = [f"{x.joint} {x.side} {x.limit:.3f} rad by up to {x.max_excess:.3f} rad for "
-             f"{x.steps} steps ({x.seconds:.2f} s) from step {x.first_step}"
+        return "inside every joint range"
+    parts = [f"{x.joint} {x.side} {x.limit:.3g} rad by up to {x.max_excess:.3g} rad, "
+             f"{x.steps} steps ({x.seconds:.3g} s) in all, first at step {x.first_step}"
              for x in r.joints]
-    return (f"LEFT ITS JOINT RANGES on {r.steps_outside} steps ({r.seconds_outside:.2f} s): "
+    return (f"LEFT ITS JOINT RANGES on {r.steps_outside} steps ({r.seconds_outside:.3g} s): "
             + "; ".join(parts) + " — a verdict on this run is one on a trajectory the arm "
             "cannot fly")
+
+
+def range_words(r: rs.JointRangeRecord) -> str:
+    """"" inside every range, else the worst excursion in a few words (eq. 42)."""
+    if not r.left:
+        return ""
+    x = r.joints[0]
+    more = f" and {len(r.joints) - 1} more" if len(r.joints) > 1 else ""
+    return (f"left its joint ranges ({x.joint} up to {x.max_excess:.3g} rad {x.side} its "
+            f"{x.limit:.3g} rad limit, {x.seconds:.3g} s{more}; {r.seconds_outside:.3g} s "
+            f"in all)")
 
 
 def range_mark(run: str, r: rs.JointRangeRecord) -> str:
     """The mark a verdict on a run carries when the run left a joint range (eq. 42), "" when
     it did not: the worst joint, by how much and for how long."""
-    if not r.left:
-        return ""
-    x = r.joints[0]
-    more = f" and {len(r.joints) - 1} more" if len(r.joints) > 1 else ""
-    return (f" Marked: {run} left its joint ranges ({x.joint} up to {x.max_excess:.3g} rad "
-            f"{x.side} its {x.limit:.3g} rad limit, {x.seconds:.3g} s{more}; "
-            f"{r.seconds_outside:.3g} s in all): a trajectory the arm cannot fly.")
+    words = range_words(r)
+    return f" Marked: {run} {words}: a trajectory the arm cannot fly." if words else ""

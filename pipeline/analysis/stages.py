@@ -106,6 +106,23 @@ def representative_step(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float
     return Representative(k, rule, below, bool(ok.any()))
 
 
+def representative_nearest(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float,
+                           target: float) -> Representative:
+    """The step of the window whose s_min_G is nearest ``target`` among its steps with s_min_J
+    ≥ floor (all of them, flagged, if none is): the seed note's regime, "a representative
+    near-singular step (s_min_G ~ 0.032)", taken where a mission flies it (issue 50). Ties go
+    to the earlier step."""
+    ok = s_min_J >= floor
+    below = int(np.count_nonzero(~ok))
+    pool = np.flatnonzero(ok) if ok.any() else np.arange(s_min_G.size)
+    k = int(pool[np.argmin(np.abs(s_min_G[pool] - target))])
+    rule = (f"step of s_min_G nearest {target:.6g} among the window's {pool.size} steps"
+            + (f" with s_min_J ≥ the damped inverse's floor {floor:g}" if ok.any() else
+               f", every one below the damped inverse's floor {floor:g} (M̆ distorted there)")
+            + (f" ({below} steps below it left out)" if below and ok.any() else ""))
+    return Representative(k, rule, below, bool(ok.any()))
+
+
 def require_provenance(path, prov: rs.Provenance) -> None:
     """CheckFailed unless σ_min of the rebuilt Γ matches the logged s_min_G on every step."""
     if prov.max_abs_s_min_G > PROVENANCE_TOL:
@@ -115,7 +132,7 @@ def require_provenance(path, prov: rs.Provenance) -> None:
 
 
 def analyze_log(log: VerifiedLog, window_start: float | None = None,
-                check: bool = True) -> rs.AnalysisRecord:
+                check: bool = True, s_min_G_target: float | None = None) -> rs.AnalysisRecord:
     """All single-log stages; returns the analysis record (the content of analysis.json).
     ``log``: a verified log, as the artefact store hands it out
     (:meth:`pipeline.store.door.ArtefactStore.open_log`)."""
@@ -140,7 +157,10 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
     skip = ("x_tilde", "kappa_G", JOINT_EXCESS, OUTSIDE_JOINT_RANGE, *flags)
     cols = log.columns([*(c for c in REQUIRED if c not in skip),
                         *flags], win.start, win.stop)
-    rep = representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
+    rep = (representative_step(cols["s_min_G"], cols["s_min_J"], robot.floor)
+           if s_min_G_target is None else
+           representative_nearest(cols["s_min_G"], cols["s_min_J"], robot.floor,
+                                  s_min_G_target))
     th = theory_at_step(robot, spec, log, win.start + rep.index)
     at_rep = replace(th.record, rule=rep.rule, window_steps_below_floor=rep.below_floor,
                      at_or_above_floor=rep.above_floor)
@@ -303,7 +323,7 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
     y (eq. 26), the singular values of Γ and the reduced velocity ν̆ = (Γ v)[3:] over the
     window. Every step's SVD starts from the step before's vectors (about half the sweeps of a
     start from the identity), so the rebuilt σ_min differs from the simulator's (started from
-    the identity each step) by rounding alone, about 1e-16."""
+    the identity each step) by rounding alone: a few ε ‖Γ‖ absolutely, about 1e-16 here."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
     ys, sigmas, nus, V_prev, Vt_last = [], [], [], None, None
     for chunk in _batches(log.iter_columns(["step", "q", "v", "s_min_G", "kappa_G"])):

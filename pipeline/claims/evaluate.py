@@ -129,9 +129,21 @@ class Context:
             done = self.store.analysis(
                 self.runs[name].log, self.runs[dep].log if dep else None,
                 against_record=self.analyses.get(dep) if dep else None,
-                controller=controller)
+                controller=controller, s_min_G_target=self._target(name))
             self.analyses[name] = done.record
             self.files.append(done.path)
+
+    def _target(self, name: str) -> float | None:
+        """Run ``name``'s at_s_min_G as a number: as given, or read from its source (the note,
+        or a run analysed before it: needed_runs orders them)."""
+        at = self.cf.runs[name].at_s_min_G
+        if at is None or isinstance(at, float):
+            return at
+        value, _ = self.value(at)
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise SpecError(f"{self.cf.source}: run {name}: at_s_min_G {at!r} reads {value!r}, "
+                            f"not a σ above 0")
+        return float(value)
 
     def note(self):
         """The seed note's published values (the claims file's ``note:``), or None."""
@@ -340,15 +352,17 @@ def evaluate(cf: ClaimsFile, ctx: Context) -> list[ClaimEval]:
     return out
 
 
-def seed_table(ctx: Context, claims: list[dict]) -> list:
-    """The note's evidence table beside the claims' runs of its columns (by run name), each
-    cell judged by the evaluated ``claims`` (claims.json's)."""
-    from pipeline.claims.seed_note import COLUMNS, note_table
+def seed_table(ctx: Context, claims: list[dict]) -> tuple[list, list]:
+    """The note's evidence table beside the claims' runs of its columns (by run name: today's
+    nominal and dt010, and the note's regime, issue 50), each cell judged by the evaluated
+    ``claims`` (claims.json's), and where each column's theory was taken."""
+    from pipeline.claims.seed_note import TABLE_COLUMNS, column_regimes, note_table
 
     note = ctx.note()
     if note is None:
-        return []
-    return note_table(note, {c: ctx.analyses[c] for c in COLUMNS if c in ctx.analyses}, claims)
+        return [], []
+    records = {c: ctx.analyses[c] for c in TABLE_COLUMNS if c in ctx.analyses}
+    return note_table(note, records, claims), column_regimes(records)
 
 
 @dataclass(frozen=True)
@@ -358,6 +372,7 @@ class ClaimsOutcome:
     claims_file: ClaimsFile
     results: list[ClaimEval]
     note_rows: list
+    note_regimes: list  # seed_note.ColumnRegime: where each column's theory was taken
     source_version: str
     record: Path  # claims.json
     files: tuple[Path, ...]  # every artefact the evaluation read or made (Context.files)
@@ -383,7 +398,7 @@ def run_claims(claims: Path | str, out: Path, studies: str = "read") -> ClaimsOu
     version = source_version()
     path = write_claims_json(results, cf, out, version)
     written = read_claims_json(path)
-    return ClaimsOutcome(cf, results, seed_table(ctx, written["claims"] if written else []),
-                         version, path, tuple(ctx.files),
+    rows, regimes = seed_table(ctx, written["claims"] if written else [])
+    return ClaimsOutcome(cf, results, rows, regimes, version, path, tuple(ctx.files),
                          ctx.cross_check_result)
 

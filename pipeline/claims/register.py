@@ -119,6 +119,9 @@ class RunRef(_Strict):
     controller: str | None = None  # an imported log's declared controller (a spec)
     against: str | None = None
     expect: Literal["complete", "diverged"] = "complete"
+    # The theory at the window's step of s_min_G nearest this (issue 50): a number, or a
+    # metric SOURCE:PATH (the note's value, or another run's record) read before the analysis.
+    at_s_min_G: float | str | None = None
 
     @model_validator(mode="after")
     def _one_source(self) -> RunRef:
@@ -132,7 +135,17 @@ class RunRef(_Strict):
         if self.controller is not None and self.imported is None:
             raise ValueError("controller declares an imported log's controller; a spec's run "
                              "has its own")
+        if self.at_s_min_G is not None and self.imported is not None:
+            raise ValueError("at_s_min_G chooses a simulated run's representative step; an "
+                             "imported log's theory is its declared controller's")
+        if isinstance(self.at_s_min_G, float) and not (math.isfinite(self.at_s_min_G)
+                                                      and self.at_s_min_G > 0.0):
+            raise ValueError("at_s_min_G: a finite σ above 0, or a metric SOURCE:PATH")
         return self
+
+    def at_source(self) -> str | None:
+        """The run or source whose value ``at_s_min_G`` reads, if it is a metric."""
+        return split_metric(self.at_s_min_G)[0] if isinstance(self.at_s_min_G, str) else None
 
 
 class SweepRef(_Strict):
@@ -239,6 +252,16 @@ def validate(cf: ClaimsFile, path: Path) -> None:
         if run.against is not None and run.against not in cf.runs:
             raise SpecError(f"{path}: run {name}: against {run.against!r} is not a run name "
                             f"(runs: {', '.join(cf.runs)})")
+        if isinstance(run.at_s_min_G, str):
+            try:
+                source = run.at_source()
+            except ValueError as exc:
+                raise SpecError(f"{path}: run {name}: at_s_min_G: {exc}") from None
+            if source == name or (source not in cf.runs and source != "note"):
+                raise SpecError(f"{path}: run {name}: at_s_min_G {run.at_s_min_G!r}: its "
+                                f"source is the note or another run (runs: "
+                                f"{', '.join(cf.runs)})")
+    _ordered(cf, list(cf.runs), path)  # no cycle through against and at_s_min_G
     sources = ", ".join([*cf.runs, *FIXED_SOURCES])
     for claim in cf.claims:
         for k, chk in enumerate(claim.checks, 1):
@@ -341,14 +364,41 @@ def needed_montecarlos(cf: ClaimsFile, kind: str = "montecarlo") -> list[str]:
                               if source == kind))
 
 
+def _depends(cf: ClaimsFile, name: str) -> list[str]:
+    """The runs a run's analysis needs first: the one it is compared against, the one whose
+    record gives its at_s_min_G."""
+    run = cf.runs[name]
+    return [d for d in (run.against, run.at_source()) if d is not None and d in cf.runs]
+
+
+def _ordered(cf: ClaimsFile, names: list[str], path: Path | str = "") -> list[str]:
+    """``names`` with every run's dependencies (:func:`_depends`) added and placed before it;
+    SpecError on a cycle."""
+    out: list[str] = []
+    state: dict[str, int] = {}  # 1: being placed, 2: placed
+
+    def place(n: str, trail: tuple[str, ...]) -> None:
+        if state.get(n) == 2:
+            return
+        if state.get(n) == 1:
+            raise SpecError(f"{path or cf.source}: runs {' -> '.join((*trail, n))}: a cycle "
+                            f"through against and at_s_min_G")
+        state[n] = 1
+        for d in _depends(cf, n):
+            place(d, (*trail, n))
+        state[n] = 2
+        out.append(n)
+
+    for n in names:
+        place(n, ())
+    return out
+
+
 def needed_runs(cf: ClaimsFile) -> list[str]:
-    """Run names the claims use, with the runs they are compared against, dependencies first."""
-    used = list(dict.fromkeys(source for source, _ in _metrics(cf) if source in cf.runs))
-    for name in list(used):
-        dep = cf.runs[name].against
-        if dep is not None and dep not in used:
-            used.append(dep)
-    return sorted(used, key=lambda n: cf.runs[n].against is not None)
+    """Run names the claims use, with the runs they need first (compared against, or read
+    for at_s_min_G), dependencies first."""
+    return _ordered(cf, list(dict.fromkeys(source for source, _ in _metrics(cf)
+                                           if source in cf.runs)))
 
 
 def register_sources(cf: ClaimsFile) -> dict[str, str]:

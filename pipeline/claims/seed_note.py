@@ -24,6 +24,16 @@ from pipeline.paths import SHIPPED_SPECS
 from pipeline.yamlfile import read_yaml
 
 COLUMNS = ("nominal", "dt010")
+# The note's regime (issue 50): the register's runs measured where the note measured, "at a
+# representative near-singular step (s_min_G ~ 0.032)", each beside the note's column it is
+# compared with. The table shows them after today's rows on nominal and dt010.
+REGIME_COLUMNS = {"reach": "nominal", "reach_dt010": "dt010"}
+TABLE_COLUMNS = (*COLUMNS, *REGIME_COLUMNS)
+
+
+def note_column(column: str) -> str:
+    """The note's column (nominal or dt010) a table column is compared with."""
+    return REGIME_COLUMNS.get(column, column)
 NOTE_FILE = SHIPPED_SPECS / "seed_note.yaml"  # the mechanism reports' note
 
 
@@ -45,6 +55,8 @@ class NoteRow(_Strict):
 class SeedNote(_Strict):
     note: str
     runs: dict[str, str]
+    # The specs of the note's regime columns (REGIME_COLUMNS), for the mechanism page.
+    regime_runs: dict[str, str] = Field(default_factory=dict)
     rows: list[NoteRow] = Field(min_length=1)
     source: str = ""
 
@@ -170,7 +182,8 @@ def judgement(claims: list[dict], key: str, column: str, path: str) -> Judgement
     metric = f"{column}:{path}"
     reading = [c for c in claims if any(k["metric"] == metric for k in c["checks"])]
     against_note = [c for c in reading if any(
-        k["metric"] == metric and k.get("threshold_metric") == f"note:{key}.{column}"
+        k["metric"] == metric
+        and k.get("threshold_metric") == f"note:{key}.{note_column(column)}"
         for k in c["checks"])]
     note_rows = [c for c in reading if c.get("kind") == "note"]
     chosen = (against_note or note_rows or reading or [None])[0]
@@ -190,14 +203,41 @@ def note_table(note: SeedNote, records: dict[str, AnalysisRecord],
     out = []
     for r in note.rows:
         cells = []
-        for col in COLUMNS:
+        for col in TABLE_COLUMNS:
             rec = records.get(col)
             ours = _number_at(rec, r.ours) if rec else None
             also = tuple((label, _number_at(rec, p) if rec else None)
                          for label, p in r.also.items())
             j = judgement(claims, r.key, col, r.ours) if claims and rec else None
-            cells.append(Cell(col, getattr(r, col), ours, also, r.roundoff, j))
+            cells.append(Cell(col, getattr(r, note_column(col)), ours, also, r.roundoff, j))
         out.append(TableRow(r.key, r.row, r.ours_label, tuple(cells)))
+    return out
+
+
+@dataclass(frozen=True)
+class ColumnRegime:
+    """Where a table column's values were measured: its run, the note's column it is compared
+    with, and the representative step's rule, σ_min(Γ), step and time, from the record."""
+
+    column: str
+    spec: str
+    note_column: str
+    rule: str
+    s_min_G: float | None
+    step: int | None
+    t: float | None
+
+
+def column_regimes(records: dict[str, AnalysisRecord]) -> list[ColumnRegime]:
+    """Each table column that has a record (TABLE_COLUMNS' order): where its theory was taken."""
+    out = []
+    for col in TABLE_COLUMNS:
+        rec = records.get(col)
+        th = getattr(rec, "theory", None)
+        if rec is None or th is None:
+            continue
+        out.append(ColumnRegime(col, rec.spec_name, note_column(col), th.rule, th.s_min_G,
+                                th.step, th.t))
     return out
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pipeline.analysis.joint_ranges import range_mark
+from pipeline.analysis.joint_ranges import range_mark, range_words
 from pipeline.analysis.schema import CompleteRecord
 from pipeline.reports.figures import RunData
 
@@ -54,7 +54,7 @@ class FixTable:
 
 
 def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
-             below_floor: int, window_steps: int) -> str:
+             below_floor: int, window_steps: int, left_range: str = "") -> str:
     # The theory (eqs. 21, 34, 35) is the loop's linearisation above the damped inverse's
     # floor; a run that spends window steps below it flew another loop there, so neither its
     # margins nor its agreement speak for those steps: no verdict, least of all "fix".
@@ -67,6 +67,10 @@ def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
         return f"unstable: {', '.join(rings)} ring"
     if not meets:
         return f"stable and quiet, misses the requirement ({least}: {gm:.3g} dB)"
+    # A loop that meets the requirement on a trajectory the arm cannot fly (eq. 42) is no fix
+    # for the arm: it would be flown another way.
+    if left_range:
+        return f"not a fix: meets the requirement, but {left_range}"
     return FIX
 
 
@@ -92,7 +96,7 @@ def fix_row(r: RunData) -> FixRow:
         boresight_err_deg_max=rec.metrics.boresight_err_deg_max, steps_per_s=1.0 / rec.dt,
         below_floor=below, window_steps=steps,
         verdict=_verdict(meets, rings, p.agrees, least.symbol, least.margins.gain_margin_db,
-                         below, steps))
+                         below, steps, range_words(rec.joint_ranges)))
 
 
 def _loop_words(plant: str, delay: int) -> str:

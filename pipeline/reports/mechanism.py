@@ -11,7 +11,15 @@ import numpy as np
 
 from pipeline.analysis.joint_ranges import excursion_words, range_mark
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
-from pipeline.claims.seed_note import NOTE_FILE, differences, fmt, load_note, note_table
+from pipeline.claims.seed_note import (
+    NOTE_FILE,
+    TABLE_COLUMNS,
+    column_regimes,
+    differences,
+    fmt,
+    load_note,
+    note_table,
+)
 from pipeline.reports.figures import RunData, against_log
 from pipeline.reports.fixes import severity
 from pipeline.reports.templating import num
@@ -155,14 +163,25 @@ def harm_table(rec: CompleteRecord, other: CompleteRecord) -> list[dict]:
             for label, unit, path, channel in HARM_ROWS]
 
 
-def note_rows(rec: CompleteRecord, other: CompleteRecord, claims: dict | None = None) -> list:
-    """The seed note's table beside this pair, when the pair is the note's own (its runs),
-    judged by the register's ``claims`` (claims.json) when given."""
+def note_records(rec: CompleteRecord, other: CompleteRecord, others: list[RunData]
+                 ) -> dict[str, CompleteRecord]:
+    """The seed note's table's records (its columns: today's nominal and dt010, then the
+    note's regime, issue 50) when this pair is the note's own (its runs), else {}."""
     note = load_note(NOTE_FILE)
     if (rec.spec_name, other.spec_name) != (note.runs["nominal"], note.runs["dt010"]):
+        return {}
+    by_spec = {o.record.spec_name: o.record for o in others
+               if isinstance(o.record, CompleteRecord)}
+    regime = {col: by_spec[spec] for col, spec in note.regime_runs.items() if spec in by_spec}
+    return {"nominal": rec, "dt010": other, **regime}
+
+
+def note_rows(records: dict[str, CompleteRecord], claims: dict | None = None) -> list:
+    """The seed note's table beside ``records`` (note_records), judged by the register's
+    ``claims`` (claims.json) when given."""
+    if not records:
         return []
-    return note_table(note, {"nominal": rec, "dt010": other},
-                      claims["claims"] if claims else None)
+    return note_table(load_note(NOTE_FILE), records, claims["claims"] if claims else None)
 
 
 def mechanism_context(run: RunData, others: list[RunData], claims: dict | None = None) -> dict:
@@ -178,7 +197,8 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     flipped = sum(d.lag1 is not None and d.lag1 > LAG1_SMOOTH for d in other.directions)
     limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
-    table = note_rows(rec, other, claims)
+    note_recs = note_records(rec, other, others)
+    table = note_rows(note_recs, claims)
     # The implicit-damping runs of this robot on this loop (plant and delay) at this step.
     def loop(r: RunData) -> tuple:
         th_r = r.record.theory
@@ -199,7 +219,8 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "severity": severity(rec, run.spec), "recommended": recommended(th),
         "ranges": [(r.spec_name, excursion_words(r.joint_ranges)) for r in (rec, other)],
         "plant_words": th.update_order,
-        "note_rows": table, "note_labels": names, "note_differences": differences(table),
+        "note_rows": table, "note_labels": TABLE_COLUMNS,
+        "note_regimes": column_regimes(note_recs), "note_differences": differences(table),
         "fmt": fmt, "versions": versions,
         "harm_rows": harm_table(rec, other),
         # The pair's start-up and spectrum figures are drawn when both logs are there.

@@ -439,7 +439,10 @@ def svd_right_sequence(A: np.ndarray, Vt0: np.ndarray) -> tuple[np.ndarray, np.n
     orthogonal but for A's change over a step, so it needs two or three sweeps where a start
     from the identity needs seven or eight (the analysis' Γ over consecutive steps, eq. 26).
     The start is made orthonormal again by one Newton–Schulz step first, so the rounding of
-    one member's rotations is not carried into the next."""
+    one member's rotations is not carried into the next. The rows rotated are those of A_k
+    V_start, a product, so each σ is right to about n ε ‖A_k‖ absolutely (a small σ of a
+    graded A to that, not to a small multiple of ε relative to itself as from the identity):
+    about 1e-16 for the analysis' Γ, whose ‖Γ‖ is near 1."""
     N, n = A.shape[0], A.shape[1]
     S = np.empty((N, n))
     Vt = np.empty((N, n, n))

@@ -280,13 +280,17 @@ class ArtefactStore:
     def analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
                  window_start: float | None = None, force: bool = False,
                  against_record: CompleteRecord | None = None, quiet: bool = False,
-                 controller: Spec | None = None) -> StoredAnalysis:
+                 controller: Spec | None = None,
+                 s_min_G_target: float | None = None) -> StoredAnalysis:
         """The analysis record of ``log``, compared with ``against`` (a run of the same robot,
         else a SpecError before any work), reused when current, else computed and written
         under the folder's lock. A chosen ``window_start`` is always computed (the stored
         record is of the default window). ``against_record``: ``against``'s own record, when
         the caller has it, so it is not analysed twice. ``controller``: the controller that
-        flew an imported log, declared by the user (its data stages run without one)."""
+        flew an imported log, declared by the user (its data stages run without one).
+        ``s_min_G_target``: the theory taken at the window's step of s_min_G nearest it (the
+        note's regime, issue 50) instead of the median's; like a chosen window, always
+        computed."""
         imported = log.meta.origin == "imported"
         if controller is not None and not imported:
             raise SpecError(f"--controller: {log.path} is a simulated log, its controller is "
@@ -304,7 +308,10 @@ class ArtefactStore:
                                    f"only its divergence stage runs")
         path = self.analysis_path(log)
         check_contained(self.out, path.parent)
-        fresh = force or window_start is not None
+        if s_min_G_target is not None and imported:
+            raise SpecError("--at-s-min-G: an imported log's theory is its declared "
+                            "controller's, at its own representative step")
+        fresh = force or window_start is not None or s_min_G_target is not None
         old = None if fresh else self.current_analysis(log, against, controller)
         if old is not None:
             return StoredAnalysis(old, path, True)
@@ -316,14 +323,16 @@ class ArtefactStore:
             title = f"(against {against.spec.name})" if against is not None else ""
             with nullcontext() if quiet else stage(f"analysis {log.spec.name}", title):
                 record = (analyze_imported(log, controller, window_start) if imported else
-                          self._analyse(log, against, window_start, against_record))
+                          self._analyse(log, against, window_start, against_record,
+                                        s_min_G_target))
             write_analysis(record, self.analysis_root(log))
         return StoredAnalysis(record, path, False)
 
     @staticmethod
     def _analyse(log: VerifiedLog, against: VerifiedLog | None, window_start: float | None,
-                 against_record: CompleteRecord | None) -> AnalysisRecord:
-        record = analyze_log(log, window_start)
+                 against_record: CompleteRecord | None,
+                 s_min_G_target: float | None = None) -> AnalysisRecord:
+        record = analyze_log(log, window_start, s_min_G_target=s_min_G_target)
         if against is not None:
             other = (against_record if against_record is not None and window_start is None
                      else analyze_log(against, window_start))

@@ -178,7 +178,8 @@ def expected_step(mission, s, h: float = 1e-6) -> tuple[dict, dict]:
             "u_applied": u, "attitude_excursion_deg": 0.0}
     # Eq. 42 element by element, from the model's limits (a joint without one: none).
     lo, hi = rob.model.lowerPositionLimit[7:], rob.model.upperPositionLimit[7:]
-    excess = np.array([x - b if x > b and b < 1e10 else x - a if x < a and a > -1e10 else 0.0
+    excess = np.array([0.0 if abs(a) > 1e10 and abs(b) > 1e10 else x - b if x > b
+                       else x - a if x < a else 0.0
                        for x, a, b in zip(q[7:], lo, hi, strict=True)])
     row |= {"joint_excess": excess, "outside_joint_range": bool(np.any(excess != 0.0))}
     nxt = {"q": pin.integrate(rob.model, q, v_new * dt), "v": v_new, "v_c": v_c_new,
