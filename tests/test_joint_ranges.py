@@ -140,3 +140,29 @@ def test_a_loop_that_meets_the_requirement_off_the_arms_ranges_is_not_a_fix(tmp_
     assert row.verdict != FIX
     assert row.verdict.startswith("not a fix: meets the requirement, but left its joint "
                                   "ranges (wrist_1_joint up to "), row.verdict
+
+
+def test_a_claim_reading_a_run_that_left_a_range_is_marked(tmp_path):
+    """The claims page marks a claim whose checks read a run that left a joint range, and no
+    other (eq. 42): a finding on a trajectory the arm cannot fly says so."""
+    from types import SimpleNamespace
+
+    from pipeline.analysis import schema as rs
+    from pipeline.claims.evaluate import range_marks
+    from pipeline.claims.register import load_claims
+
+    p = tmp_path / "claims.yaml"
+    p.write_text("runs:\n  a: {spec: nominal}\n  b: {spec: nominal}\nclaims:\n"
+                 + "".join(f"  - id: C{i}\n    kind: physics\n    expect: hold\n"
+                           f"    statement: x\n    checks:\n      - {{metric: \"{run}:dominant."
+                           f"lag1\", op: lt, threshold: 0}}\n" for i, run in ((1, "a"), (2, "b"))))
+    left = rs.JointRangeRecord(left=True, steps_outside=3, seconds_outside=0.09, max_excess=0.2,
+                               joints=[rs.JointExcursion("j2", "above", 0.5, 0.2, 3, 0.09, 7)])
+    inside = rs.JointRangeRecord(left=False, steps_outside=0, seconds_outside=0.0,
+                                 max_excess=0.0, joints=[])
+    ctx = SimpleNamespace(analyses={"a": SimpleNamespace(joint_ranges=left),
+                                    "b": SimpleNamespace(joint_ranges=inside)})
+    marks = range_marks(load_claims(p), ctx)
+    assert set(marks) == {"C1"}
+    assert marks["C1"].startswith("Marked: a left its joint ranges (j2 up to 0.2 rad above its "
+                                  "0.5 rad limit"), marks["C1"]

@@ -373,6 +373,8 @@ class ClaimsOutcome:
     results: list[ClaimEval]
     note_rows: list
     note_regimes: list  # seed_note.ColumnRegime: where each column's theory was taken
+    # Claim id → the runs its checks read that left a joint range (eq. 42), in words.
+    range_marks: dict[str, str]
     source_version: str
     record: Path  # claims.json
     files: tuple[Path, ...]  # every artefact the evaluation read or made (Context.files)
@@ -399,6 +401,22 @@ def run_claims(claims: Path | str, out: Path, studies: str = "read") -> ClaimsOu
     path = write_claims_json(results, cf, out, version)
     written = read_claims_json(path)
     rows, regimes = seed_table(ctx, written["claims"] if written else [])
-    return ClaimsOutcome(cf, results, rows, regimes, version, path, tuple(ctx.files),
-                         ctx.cross_check_result)
+    return ClaimsOutcome(cf, results, rows, regimes, range_marks(cf, ctx), version, path,
+                         tuple(ctx.files), ctx.cross_check_result)
+
+
+def range_marks(cf: ClaimsFile, ctx: Context) -> dict[str, str]:
+    """Each claim that reads a run which left a joint range of its robot file (eq. 42): the
+    mark its verdict carries, a finding on a trajectory the arm cannot fly."""
+    from pipeline.analysis.joint_ranges import range_mark
+
+    out = {}
+    for claim in cf.claims:
+        runs = dict.fromkeys(split_metric(m)[0] for k in claim.checks
+                             for m in (k.metric, k.threshold_metric) if m)
+        marks = [range_mark(run, ctx.analyses[run].joint_ranges) for run in runs
+                 if run in ctx.analyses and hasattr(ctx.analyses[run], "joint_ranges")]
+        if any(marks):
+            out[claim.id] = "".join(marks).strip()
+    return out
 

@@ -15,7 +15,7 @@ def render_claims(outcome: ClaimsOutcome, out_dir: Path) -> Path:
     """Render the register beside its ``claims.json``; returns the Markdown page."""
     ctx = {"results": outcome.results, "claims_file": display_path(outcome.claims_file.source),
            "note_rows": outcome.note_rows, "note_labels": TABLE_COLUMNS,
-           "note_regimes": outcome.note_regimes,
+           "note_regimes": outcome.note_regimes, "range_marks": outcome.range_marks,
            "note_differences": differences(outcome.note_rows),
            "fmt": fmt, "code_version": outcome.source_version,
            "counts": {s: outcome.count(s) for s in STATUSES}, "kind_names": KIND_NAMES,
