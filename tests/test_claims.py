@@ -339,6 +339,7 @@ def test_ci_register_is_the_same_claims_on_short_missions():
     assert {n: r.spec for n, r in ci.runs.items()} == {
         "nominal": "short_nominal", "dt010": "short_omega_ripple_dt010",
         "imex": "short_omega_ripple_imex", "reach": "short_omega_ripple_reach",
+        "reach_note": "short_omega_ripple_reach_note",
         "reach_dt010": "short_omega_ripple_reach_dt010",
         "unbounded": "omega_ripple_unbounded", "servicer": "short_servicer_nominal",
         "servicer_dt010": "short_servicer_dt010", "servicer_imex": "short_servicer_imex",

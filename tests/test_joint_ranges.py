@@ -122,8 +122,7 @@ def test_a_log_whose_range_columns_are_not_its_q_is_refused(past_a_limit, tmp_pa
 def test_a_loop_that_meets_the_requirement_off_the_arms_ranges_is_not_a_fix(tmp_path):
     """The fix table (eq. 35, 42): the sampled plant's implicit damping meets the requirement
     without delay (claim C35), but flown from the posture that drives wrist_1 past its range
-    it is not a fix: it would be flown another way by the arm; the decision box names no fix
-    then, and marks the run."""
+    it is not a fix: the arm would fly it another way."""
     from pipeline.analysis.stages import analyze_log
     from pipeline.logs import verify_log
     from pipeline.reports.figures import RunData
@@ -138,8 +137,8 @@ def test_a_loop_that_meets_the_requirement_off_the_arms_ranges_is_not_a_fix(tmp_
     assert rec.joint_ranges.left and all(m.margins.meets for m in rec.theory.modes)
     row = fix_row(RunData("off_range", rec, log, log.meta.spec, "off_range"))
     assert row.verdict != FIX
-    assert row.verdict.startswith("not a fix: meets the requirement, but left its joint "
-                                  "ranges (wrist_1_joint up to "), row.verdict
+    assert row.verdict.startswith("meets the requirement, but left its joint ranges "
+                                  "(wrist_1_joint up to "), row.verdict
 
 
 def test_a_claim_reading_a_run_that_left_a_range_is_marked(tmp_path):

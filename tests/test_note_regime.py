@@ -18,15 +18,15 @@ from pipeline.paths import SHIPPED_SPECS
 
 
 def test_the_nearest_step_to_the_target_among_those_above_the_floor():
-    s_min_G = np.array([0.05, 0.0319, 0.0321, 0.0322, 0.2, 0.0319])
-    s_min_J = np.array([0.1, 0.01, 0.1, 0.1, 0.1, 0.1])  # step 1 below the floor 0.02
+    # Step 1 is the nearest of all (exactly the target) but below the floor 0.02; of the
+    # others step 3 is nearest; steps 2 and 5 tie, and a tie goes to the earlier.
+    s_min_G = np.array([0.05, 0.032, 0.0331, 0.0325, 0.2, 0.0331])
+    s_min_J = np.array([0.1, 0.01, 0.1, 0.1, 0.1, 0.1])
     rep = representative_nearest(s_min_G, s_min_J, 0.02, 0.032)
-    # |0.0321 − 0.032| < |0.0319 − 0.032| in floats? Both 1e-4 apart: the earlier of the
-    # steps at the least distance, step 1, is below the floor, so 2 or 5: whichever is nearer.
-    d = np.abs(s_min_G - 0.032)
-    want = min((k for k in (2, 3, 5)), key=lambda k: (d[k], k))
-    assert rep.index == want and rep.below_floor == 1 and rep.above_floor
+    assert rep.index == 3 and rep.below_floor == 1 and rep.above_floor
     assert "nearest 0.032" in rep.rule and "1 steps below it left out" in rep.rule
+    tie = representative_nearest(s_min_G, s_min_J, 0.02, 0.0331)
+    assert tie.index == 2
     every_below = representative_nearest(s_min_G, np.zeros(6), 0.02, 0.2)
     assert every_below.index == 4 and not every_below.above_floor
 
@@ -46,7 +46,7 @@ def test_the_register_reads_a_target_from_a_run_analysed_before_it(tmp_path):
     assert needed_runs(cf) == ["a", "b"]
     shipped = load_claims(SHIPPED_SPECS / "claims.yaml")
     order = needed_runs(shipped)
-    assert order.index("reach") < order.index("reach_dt010")
+    assert order.index("reach_note") < order.index("reach_dt010")
 
 
 @pytest.mark.parametrize("runs, words", [
@@ -84,3 +84,28 @@ def test_analyze_at_a_target_takes_the_windows_nearest_step(tmp_path):
     assert "nearest 0.032" in rec["theory"]["rule"]
     bad = run_cli_in_process("analyze", log, "--at-s-min-G", "-1", "--out", tmp_path / "rep")
     assert bad.returncode == 2 and "give a finite σ above 0" in bad.stderr, bad.stderr
+
+
+def test_a_record_taken_at_a_target_is_not_reused_as_the_default_one(tmp_path):
+    """The store reuses a record only for the rule that chose its step: the default request
+    after a target analyses again (the median step), a target request after it again, and the
+    same target twice is up to date."""
+    spec = tmp_path / "reach.yaml"
+    spec.write_text("extends: short_omega_ripple_reach\nmission: {duration: 12.0}\n")
+    assert run_cli_in_process("run", spec, "--out", tmp_path / "logs").returncode == 0
+    log = tmp_path / "logs" / "reach" / "run.parquet"
+    out = tmp_path / "rep"
+    record = out / "reach" / "analysis.json"
+
+    def analyse(*extra):
+        r = run_cli_in_process("analyze", log, "--out", out, *extra)
+        assert r.returncode == 0, r.stderr
+        return "up to date" in r.stdout, json.loads(record.read_text())["theory"]
+
+    reused, th = analyse("--at-s-min-G", "0.032")
+    assert not reused and th["s_min_G_target"] == 0.032
+    reused, th = analyse()
+    assert not reused and "s_min_G_target" not in th and "median" in th["rule"]
+    assert analyse()[0]
+    assert not analyse("--at-s-min-G", "0.032")[0]
+    assert analyse("--at-s-min-G", "0.032")[0]

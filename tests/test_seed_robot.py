@@ -323,10 +323,11 @@ def test_note_table_puts_the_note_beside_our_values():
     assert rows["abs_cos"].cells[0].note is None and rows["abs_cos"].cells[0].rel_diff is None
     assert rows["provenance"].cells[0].ours is None  # not in this record: shown as —
     # The note's regime (issue 50): a reach column is compared with the note's nominal one.
-    reach = {"spec_name": "omega_ripple_reach", "theory": {"dt_mu_max": 3.9}}
-    rows = {r.key: r for r in note_table(note, {"nominal": rec, "reach": reach})}
-    cell = next(c for c in rows["dt_mu_max"].cells if c.column == "reach")
-    assert (cell.note, cell.ours) == (3.84, 3.9)
+    reach = {"spec_name": "omega_ripple_reach_note", "theory": {"dt_mu_max": 3.9}}
+    rows = {r.key: r for r in note_table(note, {"nominal": rec, "reach_note": reach})}
+    cells = rows["dt_mu_max"].cells
+    assert [c.column for c in cells] == ["nominal", "dt010", "reach_note"]  # no reach_dt010
+    assert (cells[2].note, cells[2].ours) == (3.84, 3.9)
     # The mechanism report shows the table for the note's own pair only (it reads the names),
     # with the note's regime when its runs are among the others.
     from pipeline.reports.mechanism import note_records

@@ -168,6 +168,8 @@ class Theory:
     at_or_above_floor: bool | None = field(default=None, metadata=ABSENT_WHILE_NONE)
     # a command arriving within the step, and its jitter (eq. 41): in such a run's record only
     latency: LatencyRecord | None = field(default=None, metadata=ABSENT_WHILE_NONE)
+    # the σ_min(Γ) the step was chosen nearest (analyze --at-s-min-G; issue 50), else absent
+    s_min_G_target: float | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 
 @dataclass(frozen=True)

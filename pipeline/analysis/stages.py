@@ -163,7 +163,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
                                   s_min_G_target))
     th = theory_at_step(robot, spec, log, win.start + rep.index)
     at_rep = replace(th.record, rule=rep.rule, window_steps_below_floor=rep.below_floor,
-                     at_or_above_floor=rep.above_floor)
+                     at_or_above_floor=rep.above_floor, s_min_G_target=s_min_G_target)
     card = robot.card(th.q)
 
     # Stages 5 and 6: alignment of theory and data directions, per-step velocity jump.

@@ -27,7 +27,7 @@ COLUMNS = ("nominal", "dt010")
 # The note's regime (issue 50): the register's runs measured where the note measured, "at a
 # representative near-singular step (s_min_G ~ 0.032)", each beside the note's column it is
 # compared with. The table shows them after today's rows on nominal and dt010.
-REGIME_COLUMNS = {"reach": "nominal", "reach_dt010": "dt010"}
+REGIME_COLUMNS = {"reach_note": "nominal", "reach_dt010": "dt010"}
 TABLE_COLUMNS = (*COLUMNS, *REGIME_COLUMNS)
 
 
@@ -200,10 +200,12 @@ def note_table(note: SeedNote, records: dict[str, AnalysisRecord],
     """The note's rows beside our values from ``records`` (column → analysis record), each
     cell judged by ``claims`` (claims.json's, whose runs are named as the columns) when
     given; a column without a record shows the note's value alone."""
+    # The note's two columns always; a regime column only where its run was analysed.
+    columns = [*COLUMNS, *(c for c in REGIME_COLUMNS if c in records)]
     out = []
     for r in note.rows:
         cells = []
-        for col in TABLE_COLUMNS:
+        for col in columns:
             rec = records.get(col)
             ours = _number_at(rec, r.ours) if rec else None
             also = tuple((label, _number_at(rec, p) if rec else None)
@@ -226,6 +228,7 @@ class ColumnRegime:
     s_min_G: float | None
     step: int | None
     t: float | None
+    target: float | None  # the σ_min(Γ) the step was chosen nearest, else None (the median)
 
 
 def column_regimes(records: dict[str, AnalysisRecord]) -> list[ColumnRegime]:
@@ -237,7 +240,7 @@ def column_regimes(records: dict[str, AnalysisRecord]) -> list[ColumnRegime]:
         if rec is None or th is None:
             continue
         out.append(ColumnRegime(col, rec.spec_name, note_column(col), th.rule, th.s_min_G,
-                                th.step, th.t))
+                                th.step, th.t, getattr(th, "s_min_G_target", None)))
     return out
 
 

@@ -70,7 +70,7 @@ def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
     # A loop that meets the requirement on a trajectory the arm cannot fly (eq. 42) is no fix
     # for the arm: it would be flown another way.
     if left_range:
-        return f"not a fix: meets the requirement, but {left_range}"
+        return f"meets the requirement, but {left_range}"
     return FIX
 
 
@@ -221,7 +221,10 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                    + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + "."
                    + range_mark(f.run, by_name[f.run].record.joint_ranges))
         else:
-            fix = f"No flown run of this loop meets {t.requirement}: see the fix table."
+            off = [r.run for r in t.rows if r.verdict.startswith("meets the requirement, but")]
+            fix = (f"No flown run of this loop meets {t.requirement}"
+                   + (f" on a trajectory the arm can fly ({', '.join(off)} meet it off the "
+                      f"joint ranges)" if off else "") + ": see the fix table.")
         out.append(Decision(robot, verdict, "Severity: " + severity(
             rec, by_name[bad.run].spec) + ".", fix))
     return out

@@ -270,12 +270,14 @@ class ArtefactStore:
         return analysis_path(self.analysis_root(log), log.spec.name)
 
     def current_analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
-                         controller: Spec | None = None) -> AnalysisRecord | None:
+                         controller: Spec | None = None,
+                         s_min_G_target: float | None = None) -> AnalysisRecord | None:
         """The stored analysis record of ``log`` (compared with ``against``, of an imported
         log with ``controller``, each exactly when one is given) if this analysis code made
         it from these logs, else None."""
         return current_analysis(self.analysis_path(log), log, against,
-                                controller_key(controller) if controller is not None else None)
+                                controller_key(controller) if controller is not None else None,
+                                s_min_G_target)
 
     def analysis(self, log: VerifiedLog, against: VerifiedLog | None = None,
                  window_start: float | None = None, force: bool = False,
@@ -289,8 +291,9 @@ class ArtefactStore:
         the caller has it, so it is not analysed twice. ``controller``: the controller that
         flew an imported log, declared by the user (its data stages run without one).
         ``s_min_G_target``: the theory taken at the window's step of s_min_G nearest it (the
-        note's regime, issue 50) instead of the median's; like a chosen window, always
-        computed."""
+        note's regime, issue 50) instead of the median's; the record says so, and is current
+        only for the same target (a default request after it analyses again, and replaces
+        it: give such a run a spec of its own)."""
         imported = log.meta.origin == "imported"
         if controller is not None and not imported:
             raise SpecError(f"--controller: {log.path} is a simulated log, its controller is "
@@ -311,13 +314,14 @@ class ArtefactStore:
         if s_min_G_target is not None and imported:
             raise SpecError("--at-s-min-G: an imported log's theory is its declared "
                             "controller's, at its own representative step")
-        fresh = force or window_start is not None or s_min_G_target is not None
-        old = None if fresh else self.current_analysis(log, against, controller)
+        fresh = force or window_start is not None
+        old = None if fresh else self.current_analysis(log, against, controller, s_min_G_target)
         if old is not None:
             return StoredAnalysis(old, path, True)
         with folder_lock(path.parent):
             remove_stale_temps(path.parent)
-            old = None if fresh else self.current_analysis(log, against, controller)
+            old = None if fresh else self.current_analysis(log, against, controller,
+                                                           s_min_G_target)
             if old is not None:
                 return StoredAnalysis(old, path, True)
             title = f"(against {against.spec.name})" if against is not None else ""

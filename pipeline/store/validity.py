@@ -86,13 +86,19 @@ def _made_from(record: AnalysisRecord, log: VerifiedLog) -> bool:
 
 
 def current_analysis(path: Path, log: VerifiedLog, against: VerifiedLog | None = None,
-                     controller_hash: str | None = None) -> AnalysisRecord | None:
+                     controller_hash: str | None = None,
+                     s_min_G_target: float | None = None) -> AnalysisRecord | None:
     """The analysis record at ``path`` if it was made from this log by this analysis code, over
-    the default window, compared with ``against`` exactly when one is given, and for an
-    imported log with the controller of ``controller_hash`` exactly when one is, else None."""
+    the default window, compared with ``against`` exactly when one is given, for an imported
+    log with the controller of ``controller_hash`` exactly when one is, and with its theory at
+    the step nearest ``s_min_G_target`` exactly when one is (else at the median's), else
+    None."""
     record = try_read_analysis(path)
     if (record is None or record.analysis_version != analysis_version()
             or not _made_from(record, log)):
+        return None
+    # A record whose theory was taken at another rule is not this one.
+    if getattr(getattr(record, "theory", None), "s_min_G_target", None) != s_min_G_target:
         return None
     # A record of another window (``analyze --window-start``) is not the default analysis,
     # nor is a comparison whose second run was analysed over another window.
