@@ -85,25 +85,31 @@ class Representative:
     above_floor: bool  # whether the chosen step is at or above it
 
 
+def _above_floor(s_min_J: np.ndarray, floor: float) -> tuple[bool, int, np.ndarray]:
+    """(any step at or above the damped inverse's floor, how many below it, the steps a
+    representative step is chosen among: those above it, else all, flagged)."""
+    ok = s_min_J >= floor
+    pool = np.flatnonzero(ok) if ok.any() else np.arange(s_min_J.size)
+    return bool(ok.any()), int(np.count_nonzero(~ok)), pool
+
+
 def representative_step(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float
                         ) -> Representative:
     """The step of median s_min_G among the window's steps with s_min_J ≥ floor (the lower
     median for an even count, so it is a step of the window). If every step lies below the
     floor, the median over all of them, flagged: the theory there uses a damped M̆."""
-    ok = s_min_J >= floor
-    below = int(np.count_nonzero(~ok))
-    pool = np.flatnonzero(ok) if ok.any() else np.arange(s_min_G.size)
+    above, below, pool = _above_floor(s_min_J, floor)
     order = pool[np.argsort(s_min_G[pool], kind="stable")]
     k = int(order[(order.size - 1) // 2])
-    if ok.any():
-        rule = (f"step of median s_min_G among the window's {ok.sum()} steps with s_min_J ≥ "
+    if above:
+        rule = (f"step of median s_min_G among the window's {pool.size} steps with s_min_J ≥ "
                 f"the damped inverse's floor {floor:g}" + (f" ({below} steps below it "
                                                              f"left out)" if below else ""))
     else:
         rule = (f"every one of the window's {below} steps has s_min_J below the damped "
                 f"inverse's floor {floor:g}: step of median s_min_G over all of them, where "
                 f"M̆ is distorted by the damping")
-    return Representative(k, rule, below, bool(ok.any()))
+    return Representative(k, rule, below, above)
 
 
 def representative_nearest(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: float,
@@ -112,15 +118,13 @@ def representative_nearest(s_min_G: np.ndarray, s_min_J: np.ndarray, floor: floa
     ≥ floor (all of them, flagged, if none is): the seed note's regime, "a representative
     near-singular step (s_min_G ~ 0.032)", taken where a mission flies it (issue 50). Ties go
     to the earlier step."""
-    ok = s_min_J >= floor
-    below = int(np.count_nonzero(~ok))
-    pool = np.flatnonzero(ok) if ok.any() else np.arange(s_min_G.size)
+    above, below, pool = _above_floor(s_min_J, floor)
     k = int(pool[np.argmin(np.abs(s_min_G[pool] - target))])
     rule = (f"step of s_min_G nearest {target:.6g} among the window's {pool.size} steps"
-            + (f" with s_min_J ≥ the damped inverse's floor {floor:g}" if ok.any() else
+            + (f" with s_min_J ≥ the damped inverse's floor {floor:g}" if above else
                f", every one below the damped inverse's floor {floor:g} (M̆ distorted there)")
-            + (f" ({below} steps below it left out)" if below and ok.any() else ""))
-    return Representative(k, rule, below, bool(ok.any()))
+            + (f" ({below} steps below it left out)" if below and above else ""))
+    return Representative(k, rule, below, above)
 
 
 def require_provenance(path, prov: rs.Provenance) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from pipeline.claims.evaluate import ClaimsOutcome
 from pipeline.claims.record import KIND_INTROS, KIND_NAMES, STATUSES, kind_counts
-from pipeline.claims.seed_note import TABLE_COLUMNS, differences, fmt
+from pipeline.claims.seed_note import differences, fmt
 from pipeline.paths import display_path
 from pipeline.reports.templating import render
 
@@ -14,7 +14,7 @@ from pipeline.reports.templating import render
 def render_claims(outcome: ClaimsOutcome, out_dir: Path) -> Path:
     """Render the register beside its ``claims.json``; returns the Markdown page."""
     ctx = {"results": outcome.results, "claims_file": display_path(outcome.claims_file.source),
-           "note_rows": outcome.note_rows, "note_labels": TABLE_COLUMNS,
+           "note_rows": outcome.note_rows,
            "note_regimes": outcome.note_regimes, "range_marks": outcome.range_marks,
            "note_differences": differences(outcome.note_rows),
            "fmt": fmt, "code_version": outcome.source_version,

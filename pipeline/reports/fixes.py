@@ -15,6 +15,9 @@ from pipeline.analysis.schema import CompleteRecord
 from pipeline.reports.figures import RunData
 
 FIX = "fix"
+# A loop that meets the requirement on a trajectory off the arm's joint ranges (eq. 42): its
+# verdict starts so, and the decision box reads it by this prefix.
+OFF_RANGE = "meets the requirement, but "
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,7 @@ def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
     # A loop that meets the requirement on a trajectory the arm cannot fly (eq. 42) is no fix
     # for the arm: it would be flown another way.
     if left_range:
-        return f"meets the requirement, but {left_range}"
+        return f"{OFF_RANGE}{left_range}"
     return FIX
 
 
@@ -221,7 +224,7 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                    + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + "."
                    + range_mark(f.run, by_name[f.run].record.joint_ranges))
         else:
-            off = [r.run for r in t.rows if r.verdict.startswith("meets the requirement, but")]
+            off = [r.run for r in t.rows if r.verdict.startswith(OFF_RANGE)]
             fix = (f"No flown run of this loop meets {t.requirement}"
                    + (f" on a trajectory the arm can fly ({', '.join(off)} meet it off the "
                       f"joint ranges)" if off else "") + ": see the fix table.")

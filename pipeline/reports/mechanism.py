@@ -13,7 +13,6 @@ from pipeline.analysis.joint_ranges import excursion_words, range_mark
 from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
 from pipeline.claims.seed_note import (
     NOTE_FILE,
-    TABLE_COLUMNS,
     column_regimes,
     differences,
     fmt,
@@ -219,7 +218,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "severity": severity(rec, run.spec), "recommended": recommended(th),
         "ranges": [(r.spec_name, excursion_words(r.joint_ranges)) for r in (rec, other)],
         "plant_words": th.update_order,
-        "note_rows": table, "note_labels": TABLE_COLUMNS,
+        "note_rows": table,
         "note_regimes": column_regimes(note_recs), "note_differences": differences(table),
         "fmt": fmt, "versions": versions,
         "harm_rows": harm_table(rec, other),

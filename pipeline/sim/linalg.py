@@ -456,13 +456,7 @@ def svd_right_sequence(A: np.ndarray, Vt0: np.ndarray) -> tuple[np.ndarray, np.n
             Vt[k] = np.nan
             start = np.eye(n)
             continue
-        B = np.empty((n, n))  # rows (A_k v_i)ᵀ: the columns of A_k V_start
-        for i in range(n):
-            for r in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += A[k, r, c] * start[i, c]
-                B[i, r] = acc
+        B = matmul(start, np.ascontiguousarray(A[k].T))  # rows (A_k v_i)ᵀ: A_k V_start's columns
         W = start.copy()
         _orthogonalise_rows(B, W)
         norms = _row_norms(B)
