@@ -151,7 +151,8 @@ def _transform_bundle():
 def _step_state():
     from pipeline.sim import control_step as cs
 
-    return cs.StepState(**{f: (False if f == "has_prev" else 0.0 if size == 1 else _c(size))
+    flags = ("has_prev", "measure")
+    return cs.StepState(**{f: (False if f in flags else 0.0 if size == 1 else _c(size))
                            for f, size in _layout().state_fields if f != "dq"})
 
 

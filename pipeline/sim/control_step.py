@@ -38,10 +38,11 @@ from pipeline.sim.task_transform import DynamicsInputs, full_transform
 
 def state_fields(shape: RobotShape) -> Layout:
     """The carried state: what step k hands to step k + 1, and the increment v_{k+1} dt that
-    Pinocchio's integrate turns into q_{k+1} (eq. 22)."""
+    Pinocchio's integrate turns into q_{k+1} (eq. 22). ``measure`` set: v_c and v̆ are not
+    carried but measured at the step's start, ν = Γ(q) v (the sampled-data plant, eq. 29)."""
     return (("q", shape.nq), ("v", shape.nv), ("v_c", 3), ("v_breve", shape.n_breve),
             ("tau", 1), ("integral", 3), ("v_breve_des_prev", shape.n_breve), ("has_prev", 1),
-            ("dq", shape.nv))
+            ("measure", 1), ("dq", shape.nv))
 
 
 def controller_fields(shape: RobotShape) -> Layout:
@@ -157,7 +158,8 @@ def read_state(s, at):
     return StepState(
         q=s[at.q].copy(), v=s[at.v].copy(), v_c=s[at.v_c].copy(),
         v_breve=s[at.v_breve].copy(), tau=s[at.tau], integral=s[at.integral].copy(),
-        v_breve_des_prev=s[at.v_breve_des_prev].copy(), has_prev=s[at.has_prev] > 0.5)
+        v_breve_des_prev=s[at.v_breve_des_prev].copy(), has_prev=s[at.has_prev] > 0.5,
+        measure=s[at.measure] > 0.5)
 
 
 @jit
@@ -329,6 +331,13 @@ def controller_step(inputs, ref, ctrl, state, rows, k, coverage, shape_index):
                           J_e=inputs.J_e, dJ_e=inputs.dJ_e, M=inputs.M, C=inputs.C,
                           Ag=inputs.Ag, dAg=inputs.dAg)
     tr = full_transform(pose, p.mass, p.inverse_floor, p.inverse_damping, s.v)
+    st = at.state
+    if s.measure:  # the sampled-data plant's state: the controller measures ν = Γ(q) v
+        nu_measured = matvec(tr.gamma, s.v)
+        state[st.v_c] = nu_measured[0:3]
+        state[st.v_breve] = nu_measured[3:]
+        state[st.measure] = 0.0
+        s = read_state(state, st)
     gamma = scale_by_svd(tr.s_min_G, p.ramp_low, p.ramp_high, p.ramp_floor)
     if p.derate_gain:  # the bus block of K̆ and D̆ scales with γ (eq. 20)
         p.k[0:3] *= gamma
@@ -348,7 +357,6 @@ def controller_step(inputs, ref, ctrl, state, rows, k, coverage, shape_index):
     write_row(rows[k], at.row, s, tr, gamma, p.dt, out, u, pointing, boresight,
               coverage.count[0] / coverage.seen.size)
 
-    st = at.state
     state[st.v] = out.v
     state[st.v_c] = out.v_c
     state[st.v_breve] = out.v_breve

@@ -279,9 +279,8 @@ class Mission:
         if self._sensors is not None:  # the controller's view of the plant (eq. 40)
             self._true = (q, v)
             q, v = self._sensors.measure(q, v)
-        nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
-        state[at["q"]], state[at["v"]], state[at["v_c"]], state[at["v_breve"]] = (
-            q, v, nu[:3], nu[3:])
+        # ν = Γ(q) v is measured by the next step's kernel, from the Γ it computes anyway.
+        state[at["q"]], state[at["v"]], state[at["measure"].start] = q, v, 1.0
         return True
 
     def _start_sensors(self) -> None:
@@ -314,6 +313,10 @@ class Mission:
         self._start_sensors()
         self._advance(0, state, rows, self.controller_vector(),
                       CoverageCounter.start(self.target, self.spec.camera))
+        if state[layout.state["measure"].start]:  # the sampled plant's: ν = Γ(q) v here
+            q, v = state[layout.state["q"]], state[layout.state["v"]]
+            nu = matvec(self.robot.gamma_matrices(q[None, :])[0], v)
+            state[layout.state["v_c"]], state[layout.state["v_breve"]] = nu[:3], nu[3:]
         f = {name: state[sl].copy() for name, sl in layout.state.items()}
         nxt = LoopState(q=f["q"], v=f["v"], v_c=f["v_c"], v_breve=f["v_breve"],
                         tau=float(f["tau"][0]), integral=f["integral"],
