@@ -12,7 +12,8 @@ unit        kernels it compiles (and nothing another unit compiles)        waits
 ==========  =============================================================  =================
 linalg      ``linalg.py``'s products and decompositions, every unit's leaf    —
 rotations   ``skew``, the leaf most kernels call                           linalg
-updates     eqs. 15a, 15b and 21: both integrators and μ = eig(M̆⁻¹D̆)       linalg
+updates     eqs. 15a, 15b, 21, 35: both integrators, μ = eig(M̆⁻¹D̆),     linalg
+            the margins' stability test (Schur–Cohn)
 rhs         eq. 13's right-hand side and its named terms                   linalg
 kinematics  eqs. 2–6's pieces: kinematic terms, damped inverse, Γ, Γ⁻¹     rotations
 redundancy  eq. 37's null-space basis, H, Γ, Γ⁻¹ and Γ̇ of a redundant arm  kinematics
@@ -189,6 +190,9 @@ def _updates() -> None:
     _compile(bc.explicit_update, _c(9, 9), _c(9), _c(9), 1.0, _c(3), _c(3))
     _compile(bc.imex_update, _c(9, 9), _c(9, 9), _c(9), _c(9), 1.0, _c(3), _c(3))
     _compile(bc.damping_rates, _c(9, 9), _c(9, 9))
+    from pipeline.sim import margins
+
+    _compile(margins.schur_stable, _c(5))  # the margins' stability test (eq. 35)
 
 
 def _errors() -> None:

@@ -326,3 +326,41 @@ def test_a_monte_carlo_disperses_the_arms_start_configuration(tmp_path):
     assert all(np.max(np.abs(a - b)) > 1e-6 for a, b in itertools.pairwise(starts))
     nominal = np.asarray(load_spec("omega_ripple_sampled_delay_dt0035").robot.q_bar)
     assert all(0 < np.max(np.abs(b - nominal)) <= 0.06 for b in bars)
+
+
+# -- the stability test without roots (eq. 35) -------------------------------------------------
+
+def test_the_schur_cohn_test_is_the_roots_verdict():
+    """schur_stable against NumPy's roots on random real polynomials of degree 1 to 20 (some
+    scaled to put roots near the unit circle) and on the loop's own characteristic polynomials
+    around their marginal gain; a polynomial with a root on or outside the circle is refused."""
+    rng = np.random.default_rng(5)
+    checked = 0
+    for _ in range(3000):
+        c = rng.standard_normal(int(rng.integers(2, 22)))
+        c *= rng.uniform(0.2, 2.0) ** np.arange(c.size)  # spread the roots' moduli
+        peak = np.abs(np.roots(c)).max()
+        if abs(peak - 1.0) < 1e-9:  # too near the circle for either to decide
+            continue
+        assert mg.schur_stable(c) == (peak < 1.0), c
+        checked += 1
+    assert checked > 2900
+    for delay, fraction in [(0, 0.25), (1, 0.5), (3, 0.9), (12, 0.1)]:
+        gm, _ = mg.gain_margin(1.0, delay, fraction)  # the marginal gain
+        for g, stable in ((gm * (1 - 1e-6), True), (gm * (1 + 1e-6), False)):
+            c = mg.characteristic(g, delay, fraction)
+            assert (np.abs(np.roots(c)).max() < 1.0) == stable
+            assert mg.schur_stable(c) == stable
+    assert not mg.schur_stable(np.array([1.0, -1.0]))  # z = 1: marginal, not stable
+    assert not mg.schur_stable(np.array([1.0, 0.0, 1.0]))  # z = ±j
+
+
+@pytest.mark.parametrize("delay", [0, 1, 2, 5, 16])
+def test_a_whole_delays_stability_is_its_closed_form(delay):
+    """_stable at a whole number of steps (the closed form g < 2 sin(π/(2(2n + 1)))) against
+    the roots, on a grid through the bound, and g = 0 (a root at z = 1) not stable."""
+    bound = 2.0 * math.sin(math.pi / (2.0 * (2 * delay + 1)))
+    for g in np.r_[np.linspace(0.01, 2.5, 60), bound * (1 - 1e-7), bound * (1 + 1e-7)]:
+        by_roots = np.abs(np.roots(mg.characteristic(g, delay))).max() < 1.0
+        assert mg._stable(float(g), float(delay)) == by_roots
+    assert not mg._stable(0.0, float(delay))

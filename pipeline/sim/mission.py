@@ -125,6 +125,7 @@ class Mission:
         self.layout: StepLayout = step_layout(self.robot.shape)
         self._reference = np.zeros(REFERENCE_SIZE)
         self._zero_q = np.zeros(self.robot.model.nq)
+        self._zero_v = np.zeros(self.robot.model.nv)
         # The sampled-data plant's own Pinocchio data and its held command (eq. 29).
         self._plant_data = self.robot.model.createData()
         self._tree = rigid_tree(self.robot.model)  # the compiled plant's model (eq. 29)
@@ -247,7 +248,7 @@ class Mission:
         model, data, plant = self.robot.model, self._plant_data, self.spec.mission.plant
         at, row_at = self.layout.state, self.layout.row
         tau = row[row_at["u_cmd"]].copy()
-        if not np.all(np.isfinite(tau)):
+        if not math.isfinite(tau @ self._zero_v):  # 0·x: NaN exactly when x is not finite
             return False
         # The commands computed and not yet wholly applied, oldest first: d of them, and with
         # a command arriving within the step (eq. 41) the one it replaces there.

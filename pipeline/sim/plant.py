@@ -94,8 +94,10 @@ def _normalised(q: np.ndarray) -> np.ndarray:
 def limit_bus_torque(tau: np.ndarray, bound: float) -> tuple[np.ndarray, bool]:
     """τ with the bus torque (the free flyer's angular entries τ[3:6], bus frame) saturated to
     norm ``bound`` (eq. 29; 0: no bound), and whether the bound was active."""
+    if bound <= 0.0:
+        return tau, False
     n = float(np.linalg.norm(tau[3:6]))
-    if bound <= 0.0 or n <= bound:
+    if n <= bound:
         return tau, False
     out = tau.copy()
     out[3:6] *= bound / n

@@ -340,24 +340,45 @@ class DampingMode:
         return self.block == GAIN_BLOCKS.index("null_space")
 
 
+def _modes(M_breve: np.ndarray, D_breve: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[slice]]:
+    """(μ, E, shares, blocks): every eigenpair of D̆ e = μ M̆ e (SciPy's symmetric-definite
+    generalized eigensolver), unsorted, and each mode's share of each gain block (a row per
+    mode), vectorised: the fix searches call this hundreds of times."""
+    import scipy.linalg
+
+    mu, E = scipy.linalg.eigh(D_breve, M_breve, check_finite=False)
+    d = np.diag(D_breve)
+    blocks = block_slices(len(d))
+    # Each mode's damping energy per axis, one contiguous row per mode (a row's sums are those
+    # of the mode's own vector). An undamped mode (μ = 0, a block's gain at 0) has no share:
+    # it goes by ‖P_j e‖².
+    squares = np.ascontiguousarray(E.T) ** 2
+    per_axis = np.where((mu > 0)[:, None], d * squares, squares)
+    shares = (np.stack([per_axis[:, sl].sum(axis=1) for sl in blocks], axis=1)
+              / per_axis.sum(axis=1)[:, None])
+    return mu, E, shares, blocks
+
+
 def damping_modes(M_breve: np.ndarray, D_breve: np.ndarray) -> list[DampingMode]:
     """Every damping mode of M̆⁻¹D̆, fastest first (eq. 21), from SciPy's symmetric-definite
     generalized eigensolver (D̆ e = μ M̆ e; not a per-step computation)."""
-    import scipy.linalg
-
-    mu, E = scipy.linalg.eigh(D_breve, M_breve)
-    d = np.diag(D_breve)
-    blocks = block_slices(len(d))
+    mu, E, shares, blocks = _modes(M_breve, D_breve)
     modes = []
     for i in np.argsort(mu)[::-1]:
         e = E[:, i]
-        # An undamped mode (μ = 0, a block's gain at 0) has no share: it goes by ‖P_j e‖².
-        per_axis = d * e**2 if mu[i] > 0 else e**2
-        shares = np.array([per_axis[sl].sum() for sl in blocks]) / per_axis.sum()
-        b = int(np.argmax(shares))
+        b = int(np.argmax(shares[i]))
         axis = blocks[b].start + int(np.argmax(np.abs(e[blocks[b]])))
-        modes.append(DampingMode(float(mu[i]), e, shares, axis))
+        modes.append(DampingMode(float(mu[i]), e, shares[i].copy(), axis))
     return modes
+
+
+def fastest_in_block(M_breve: np.ndarray, D_breve: np.ndarray, block: int) -> float | None:
+    """μ of the fastest damping mode whose largest share is block ``block``'s (the
+    ``DampingMode.block`` of :func:`damping_modes`), None when no mode is that block's."""
+    mu, _, shares, _ = _modes(M_breve, D_breve)
+    mine = mu[np.argmax(shares, axis=1) == block]
+    return float(mine.max()) if mine.size else None
 
 
 def with_gain(D_breve: np.ndarray, block: int, d: float) -> np.ndarray:
