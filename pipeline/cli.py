@@ -20,7 +20,7 @@ from pipeline.errors import PipelineError, RunFailed
 def _cmd_validate(a: argparse.Namespace) -> int:
     from pipeline.validate import validate_command
 
-    return validate_command(a.spec)
+    return validate_command(a.spec, a.explain)
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
@@ -434,6 +434,10 @@ def build_parser() -> argparse.ArgumentParser:
     v = _stage(sub, "validate", "check a spec and print what its run would cost, without "
                "running it", "nominal")
     v.add_argument("spec", help=SPEC_HELP)
+    v.add_argument("--explain", action="store_true",
+                   help="also print which keys the spec sets, which it inherits through "
+                        "extends (and from which spec) and which a null deleted (default: "
+                        "off; e.g. --explain)")
     v.set_defaults(func=_cmd_validate)
 
     r = _stage(sub, "run", "simulate a mission spec into DIR/<name>/run.parquet",

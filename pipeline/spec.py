@@ -29,6 +29,7 @@ from pydantic import (
 )
 
 from pipeline.errors import SpecError
+from pipeline.merge_patch import deleted_keys, leaf_keys, merge_patch
 from pipeline.paths import find_on_search_path, spec_search_path
 from pipeline.yamlfile import read_yaml
 
@@ -450,16 +451,6 @@ def canonical_hash(obj: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def deep_merge(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = deep_merge(out[k], v)
-        else:
-            out[k] = v
-    return out
-
-
 def resolve_spec_path(spec: str | Path, here: Path | None = None) -> Path:
     """A spec argument is a path to a YAML file (relative to ``here``, the folder of the file
     that names it, else to the working directory), or a bare name on the spec search path
@@ -489,20 +480,45 @@ def _read_yaml(path: Path) -> dict:
     return read_yaml(path, "spec")
 
 
-def raw_spec(path: Path, _chain: tuple[Path, ...] = ()) -> dict:
-    """The merged raw mapping of a spec and its ``extends`` chain."""
+def spec_chain(path: Path) -> list[tuple[Path, dict]]:
+    """The spec file and its ``extends`` ancestors, nearest first, each with its own raw
+    mapping (``extends`` taken out)."""
+    chain: list[tuple[Path, dict]] = []
     path = path.resolve()
-    if path in _chain:
-        cycle = " -> ".join(p.stem for p in (*_chain, path))
-        raise SpecError(f"{path}: cycle in extends: {cycle}")
-    data = _read_yaml(path)
-    parent = data.pop("extends", None)
-    if parent is None:
-        return data
-    if not isinstance(parent, str):
-        raise SpecError(f"{path}: field extends: must be a spec name")
-    parent_path = _named_spec(parent, path.parent, path)
-    return deep_merge(raw_spec(parent_path, (*_chain, path)), data)
+    while True:
+        if any(path == p for p, _ in chain):
+            cycle = " -> ".join(p.stem for p in (*(p for p, _ in chain), path))
+            raise SpecError(f"{path}: cycle in extends: {cycle}")
+        data = _read_yaml(path)
+        parent = data.pop("extends", None)
+        chain.append((path, data))
+        if parent is None:
+            return chain
+        if not isinstance(parent, str):
+            raise SpecError(f"{path}: field extends: must be a spec name")
+        path = _named_spec(parent, path.parent, path).resolve()
+
+
+def raw_spec(path: Path) -> dict:
+    """The merged raw mapping of a spec and its ``extends`` chain: each file a JSON Merge
+    Patch (RFC 7386) of its parent's (:mod:`pipeline.merge_patch`)."""
+    chain = spec_chain(path)
+    merged = chain[-1][1]
+    for _, data in reversed(chain[:-1]):
+        merged = merge_patch(merged, data)
+    return merged
+
+
+def key_sources(path: Path) -> tuple[dict[str, str], dict[str, str]]:
+    """({dotted key: the spec that sets it}, {dotted key: the spec whose null deleted it}) for
+    every leaf of a spec's merged mapping (``validate --explain``)."""
+    chain = spec_chain(path)
+    own = [(p.stem, leaf_keys(data)) for p, data in chain]
+    sources = {}
+    for key in leaf_keys(raw_spec(path)):
+        sources[key] = next(name for name, leaves in own if key in leaves)
+    deleted = {key: p.stem for p, data in reversed(chain) for key in deleted_keys(data)}
+    return sources, deleted
 
 
 def build_spec(name: str, data: dict, source: Path | str, here: Path | None = None,

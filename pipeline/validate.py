@@ -104,10 +104,10 @@ def report_lines(v: Validation) -> list[str]:
     stable = _loop_words(integ, Latency.of(m.plant), m.dt * v.mu_bus)
     c = v.card
     return [*_cost_lines(v, s, est, m, integ), *_mode_lines(v, m.dt, integ),
-            f"  bus-yaw damping mode (closed form): μ_bus = D_b/I_zz,bus = {v.mu_bus:.4g} 1/s, "
-            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable}); the bus body is "
-            f"{', '.join(c.bus_links)} ({c.bus_mass:.4g} kg, I_zz,bus {c.I_zz_bus:.4g} kg·m²: "
-            f"every link welded to the free joint)",
+            f"  bus-yaw damping mode: μ_bus = {v.mu_bus:.4g} 1/s at the start, "
+            f"dt·μ_bus = {v.dt_mu_bus:.3g} ({stable}), from the {c.mu_bus_rule}; the bus body "
+            f"is {', '.join(c.bus_links)} ({c.bus_mass:.4g} kg, I_zz,bus {c.I_zz_bus:.4g} "
+            f"kg·m² about the first joint's axis: every link welded to the free joint)",
             f"  camera-roll damping mode (closed form): μ_roll = D_o/I_roll = {c.mu_roll:.4g} "
             f"1/s, dt·μ_roll = {m.dt * c.mu_roll:.3g} (I_roll = {c.I_roll:.4g} kg·m² about the "
             f"last joint's axis; its CoM {c.roll_axis_offset:.2g} m and the camera "
@@ -163,7 +163,31 @@ def _cost_lines(v: Validation, s: Spec, est: Estimate, m, integ: str) -> list[st
     ]
 
 
-def validate_command(spec_arg: str) -> int:
+def explain_lines(spec_arg: str | Path) -> list[str]:
+    """Where each key of the merged spec came from (``validate --explain``): the spec itself
+    or an ``extends`` ancestor (JSON Merge Patch, RFC 7386), and what a ``null`` deleted."""
+    from pipeline.spec import key_sources, resolve_spec_path
+
+    path = resolve_spec_path(spec_arg)
+    sources, deleted = key_sources(path)
+    by_source: dict[str, list[str]] = {}
+    for key, name in sources.items():
+        by_source.setdefault(name, []).append(key)
+    own = path.stem
+    lines = [f"keys of {own} as merged (extends: JSON Merge Patch, RFC 7386; a key left out "
+             f"takes its default):"]
+    for name, keys in by_source.items():
+        where = "set here" if name == own else f"inherited from {name}"
+        lines.append(f"  {where}: {', '.join(keys)}")
+    for key, name in deleted.items():
+        lines.append(f"  deleted by {name} (null): {key}")
+    return lines
+
+
+def validate_command(spec_arg: str, explain: bool = False) -> int:
     for line in report_lines(validate_spec(spec_arg)):
         print(line)
+    if explain:
+        for line in explain_lines(spec_arg):
+            print(line)
     return 0

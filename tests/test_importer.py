@@ -877,7 +877,9 @@ def test_exact_stamps_keep_their_own_resolution_and_rounded_ones_theirs(nominal,
     assert tb.dt == pytest.approx(1 / 60, rel=1e-4) and q_names and v_names
 
 
-def test_a_run_of_a_register_that_extends_another_replaces_it_whole(tmp_path):
+def test_a_run_of_a_register_that_extends_another_merges_into_it(tmp_path):
+    """JSON Merge Patch (RFC 7386, issue 51): a child's run merges key by key into the
+    parent's; null deletes an inherited key."""
     from pipeline.claims.register import load_claims
 
     claim = {"id": "X1", "statement": "s", "expect": "hold",
@@ -888,6 +890,11 @@ def test_a_run_of_a_register_that_extends_another_replaces_it_whole(tmp_path):
     (tmp_path / "child.yaml").write_text(json.dumps(
         {"extends": "parent.yaml", "runs": {"flight": {"imported": "b"}}}))
     cf = load_claims(tmp_path / "child.yaml")
+    assert cf.runs["flight"].imported == "b"
+    assert cf.runs["flight"].controller == "short_nominal"  # inherited
+    (tmp_path / "bare.yaml").write_text(json.dumps(
+        {"extends": "parent.yaml", "runs": {"flight": {"imported": "b", "controller": None}}}))
+    cf = load_claims(tmp_path / "bare.yaml")
     assert cf.runs["flight"].imported == "b" and cf.runs["flight"].controller is None
 
 

@@ -74,7 +74,8 @@ def test_the_cycle_finder_finds_a_cycle():
 # claims and verify measure, reports render, the CLI drives (docs/architecture.md §1).
 LAYERS = (
     ("errors", "atomic_files", "bounded_read", "paths", "artefact_paths", "log_layout",
-     "shapes", "yamlfile", "version", "progress", "provenance", "platform", "orphans"),
+     "shapes", "yamlfile", "merge_patch", "version", "progress", "provenance", "platform",
+     "orphans"),
     ("spec", "budget", "joint_ranges"),
     ("logs",),
     ("sim", "importer"),

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import run_cli
+from conftest import run_cli, run_cli_in_process
 
 from pipeline.errors import SpecError
 from pipeline.paths import PROJECT_ROOT, SHIPPED_SPECS
@@ -227,6 +227,20 @@ def test_a_missing_mesh_is_not_needed_where_the_inertia_is_explicit(compiles, tm
     seed = rc.compare_parsers(SEED, _parse(SEED), "camera")
     assert result.max_diff.keys() == seed.max_diff.keys()
     load_robot_model(path, "camera")  # the loader accepts it
+
+
+def test_a_missing_mesh_is_named_on_the_terminal(tmp_path):
+    """validate on a spec whose robot file has a mesh that is not there (not needed: its
+    body's inertia is explicit) says so on the terminal, one warning line, as the
+    cross-parse's JSON does (issue 51)."""
+    path = _seed_with_mesh(tmp_path, explicit=True)
+    spec = tmp_path / "meshy.yaml"
+    spec.write_text(f"extends: short_nominal\nrobot: {{file: {path}}}\n")
+    r = run_cli_in_process("validate", spec)
+    assert r.returncode == 0, r.stderr
+    lines = [x for x in r.stderr.splitlines() if x.startswith("warning:")]
+    assert lines == [f"warning: {path}: mesh meshes/base.stl missing, not needed: the inertia "
+                     f"of box_base is explicit"]
 
 
 def test_a_missing_mesh_that_gives_a_body_its_inertia_is_refused_naming_the_body(compiles,

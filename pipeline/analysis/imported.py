@@ -27,6 +27,7 @@ from pipeline.analysis.stages import (
     choose_window,
     direction_stages,
     fastest_mode_record,
+    least_mission_steps,
     representative_step,
 )
 from pipeline.analysis.verdict import judge, mode_loops
@@ -95,7 +96,8 @@ def analyze_imported(log: VerifiedLog, controller: Spec | None = None,
         damping = damping_theory(robot, log, controller, win.start + rep.index, rep.rule)
         prediction = judge(damping.modes, np.asarray(damping.M_breve), nu_breve, dt,
                            damping.delay_steps, controller.controller.limits, None,
-                           controller.controller.null_space)
+                           controller.controller.null_space,
+                           least_mission_steps(window_start, dt))
     imp = log.meta.imported
     return rs.ImportedRecord(
         spec_name=log.spec.name, log=str(log.path), log_sha256=log.sha256,

@@ -47,8 +47,10 @@ from pipeline.errors import LogError
 # record holds no NaN (it is written as strict JSON); /8: record_sha256, the record's own content
 # hash, checked on reading; an imported log's provenance absent where the import rebuilt its σ;
 # /9: joint_ranges, the run's time outside the arm's joint ranges (eq. 42), and
-# theory.s_min_G_target where the step was chosen nearest a σ_min(Γ) (issue 50).
-SCHEMA = "breve-analysis/9"
+# theory.s_min_G_target where the step was chosen nearest a σ_min(Γ) (issue 50); /10:
+# prediction.agrees null when undetermined (never false), with undetermined_why and
+# least_mission_steps, and each ring's own reason (Ring.undetermined) (issue 51).
+SCHEMA = "breve-analysis/10"
 CONTENT_KEY = "record_sha256"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE

@@ -62,6 +62,9 @@ class Ring:
     line_share: float | None
     growth: float | None  # rms of the band's part, last third over first third
     rings: bool | None
+    # Why ``rings`` is None: SHORT (the window holds fewer than MIN_STEPS), STILL (no motion
+    # about its line beyond the numbers' resolution) or NON_FINITE; None when determined.
+    undetermined: str | None = None
 
     @property
     def trend(self) -> str | None:
@@ -72,8 +75,11 @@ class Ring:
                 "decaying" if self.growth < DECAYING else "steady")
 
 
-def _undetermined(coordinate: str, unit: str) -> Ring:
-    return Ring(coordinate, unit, None, None, None, None, None, None)
+SHORT, STILL, NON_FINITE = "short", "still", "non-finite"
+
+
+def _undetermined(coordinate: str, unit: str, why: str) -> Ring:
+    return Ring(coordinate, unit, None, None, None, None, None, None, why)
 
 
 def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
@@ -81,14 +87,16 @@ def ring(x: np.ndarray, coordinate: str, unit: str, scale: float = 1.0) -> Ring:
     (a modal coordinate's share of the reduced coordinate it is named by)."""
     x = np.asarray(x, dtype=float)
     n = x.size
-    if n < MIN_STEPS or not np.all(np.isfinite(x)):
-        return _undetermined(coordinate, unit)
+    if n < MIN_STEPS:
+        return _undetermined(coordinate, unit, SHORT)
+    if not np.all(np.isfinite(x)):
+        return _undetermined(coordinate, unit, NON_FINITE)
     k = np.arange(n, dtype=float)
     detrended = x - np.polyval(np.polyfit(k, x, 1), k)
     # No motion about the line beyond the numbers' resolution (a constant series leaves the
     # fit's rounding, a few ulps of its size): nothing to judge.
     if not np.std(detrended) > RESOLUTION_ULPS * np.finfo(float).eps * np.max(np.abs(x)):
-        return _undetermined(coordinate, unit)
+        return _undetermined(coordinate, unit, STILL)
     f = np.fft.rfftfreq(n)
     P = np.abs(np.fft.rfft(detrended * np.hanning(n))) ** 2
     total = float(P[f >= 1.0 / REFERENCE_STEPS].sum())

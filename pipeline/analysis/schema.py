@@ -240,8 +240,10 @@ class JointRangeRecord:
 
 @dataclass(frozen=True)
 class BusMode:
+    """The bus-yaw damping mode (eq. 21) with the card's rate that holds (RobotCard.mu_bus)."""
+
     dt_mu_bus: float
-    critical_I_zz: float
+    critical_I_zz: float | None  # I_zz,bus at dt·D_b/I_zz,bus = 2; None: off the axis
 
 
 @dataclass(frozen=True)

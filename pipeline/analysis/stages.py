@@ -20,6 +20,7 @@ from pipeline.analysis import signals, theory
 from pipeline.analysis.directions import project_directions, rebuild_gamma, singular_directions
 from pipeline.analysis.harm import harm, roll_smear
 from pipeline.analysis.joint_ranges import joint_range_record
+from pipeline.analysis.ringing import MIN_STEPS as RING_MIN_STEPS
 from pipeline.analysis.schema import value_at
 from pipeline.analysis.verdict import judge, mode_loops
 from pipeline.errors import CheckFailed, LogError, SpecError
@@ -73,6 +74,15 @@ def choose_window(n: int, dt: float, window_start: float | None, source: str = "
         raise LogError(f"window start {window_start} s leaves fewer than 3 steps of a "
                        f"{n * dt:g} s log")
     return Window(start, n, f"from {window_start:g} s to the end")
+
+
+def least_mission_steps(window_start: float | None, dt: float) -> int:
+    """The fewest mission steps whose analysis window (:func:`choose_window`'s rule) holds
+    ``MIN_STEPS``, what a ring's verdict needs (eq. 36): the second half's ⌈n/2⌉, or the
+    steps from ``window_start`` to the end."""
+    if window_start is None:
+        return 2 * RING_MIN_STEPS - 1
+    return round(window_start / dt) + RING_MIN_STEPS
 
 
 @dataclass(frozen=True)
@@ -193,11 +203,17 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
                                spec.camera.fov_deg),
         prediction=judge(th.record.modes, np.asarray(th.record.M_breve), nu_breve, dt,
                          th.record.delay_steps, spec.controller.limits,
-                         th.record.spectral_radius, spec.controller.null_space),
+                         th.record.spectral_radius, spec.controller.null_space,
+                         least_mission_steps(window_start, dt)),
         versions=meta.versions,
         robot=card,
         # The bus-yaw damping mode (eq. 21): dt·μ_bus and the bus inertia at which it is 2.
-        bus_mode=rs.BusMode(dt_mu_bus=dt * card.mu_bus, critical_I_zz=dt * card.D_b / 2),
+        # The sweep's predicted crossing I_zz,bus = dt·D_b/2 is the closed form's: off the
+        # axis the bus yaw mixes with the other modes as the inertia changes (which mode has
+        # the largest ω_b,z share switches), and no crossing is predicted.
+        bus_mode=rs.BusMode(dt_mu_bus=dt * card.mu_bus,
+                            critical_I_zz=(dt * card.D_b / 2 if card.bus_closed_form_holds
+                                           else None)),
         mu_max_log=mu_max_along(log, dt, card.mu_bus, robot.floor),
         modes_along=fastest_modes_along(robot, spec, log),
         joint_ranges=joint_range_record(log, JointRanges.of(robot.model), dt),

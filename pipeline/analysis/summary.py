@@ -119,10 +119,11 @@ def mode_lines(modes: list[ModeLoop], prediction: Prediction, plant: str, delay:
     """The modes judged one by one (eqs. 35, 36): each mode that rings in the theory or in the
     data, or fails the margins, on a line; the others counted."""
     late = f", {delay} step of delay" if delay else ""
-    verdict = ("agree" if prediction.agrees else
-               f"undetermined on {prediction.undetermined}" if prediction.undetermined
-               else "DISAGREE")
+    verdict = ("agree" if prediction.agrees else "DISAGREE" if prediction.agrees is False
+               else f"undetermined on {prediction.undetermined}")
     lines = [f"  modes of the loop as flown ({plant} plant{late}): theory and data {verdict}"]
+    if prediction.agrees is None and prediction.undetermined_why:
+        lines.append(f"    undetermined: {prediction.undetermined_why}")
     quiet, driven = 0, {}
     for m, j in zip(modes, prediction.modes, strict=True):
         if not (m.rings or j.measured.rings or not m.margins.meets):

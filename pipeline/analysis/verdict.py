@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.analysis.ringing import MOST, Ring, ring
+from pipeline.analysis.ringing import MIN_STEPS, MOST, NON_FINITE, SHORT, Ring, ring
 from pipeline.shapes import BREVE
 from pipeline.sim import margins as mg
 from pipeline.sim.stability import (
@@ -143,7 +143,13 @@ class Prediction:
     omega_b: list[Ring]  # each component of the bus rate, for what rings there
     undetermined: int
     theory_consistent: bool | None  # the mode loops and the map of eq. 34 agree on stability
-    agrees: bool
+    # True: every mode agrees; False: a mode disagrees, or the modes and the map do; None:
+    # undetermined (no mode disagrees but the data cannot judge one), never False.
+    agrees: bool | None
+    undetermined_why: str | None = None  # what leaves it undetermined, in words
+    # A window too short (eq. 36): the least mission steps that would determine it with the
+    # analysis' window rule; None when the length is not what leaves it undetermined.
+    least_mission_steps: int | None = None
 
 
 RULE = ("each damping mode of the loop as flown: predicted to ring when its root (eq. 35) is on "
@@ -193,12 +199,15 @@ def held_by(nu_block: np.ndarray, delay: int, dt: float, limits, measured: Ring
 
 
 def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: float,
-          delay: int, limits, map_radius: float | None, null_space=None) -> Prediction:
+          delay: int, limits, map_radius: float | None, null_space=None,
+          least_steps: int | None = None) -> Prediction:
     """Each mode of ``modes`` against its modal coordinate in ``nu_breve`` (the window's ν̆,
     N×9) (eq. 36), on a loop of ``delay`` steps of delay. ``limits``: the controller's
     ``limits`` block (and ``null_space``, a redundant arm's ``controller.null_space``: its
     block's bounds); ``map_radius``: the spectral radius of the loop's map (eq. 34), None
-    where it cannot be built (an imported log has no x̃)."""
+    where it cannot be built (an imported log has no x̃); ``least_steps``: the least mission
+    steps whose window holds ``MIN_STEPS`` under the analysis' window rule, named when the
+    window is too short to judge."""
     blocks = block_slices(nu_breve.shape[1])
     rings = []
     for m in modes:
@@ -231,10 +240,37 @@ def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: 
     undetermined = sum(j.agrees is None for j in judged)
     consistent = (None if map_radius is None else
                   bool((map_radius >= mg.UNIT) == any(m.rings for m in modes)))
+    why, least = undetermined_words(judged, nu_breve.shape[0], dt, least_steps)
+    disagrees = consistent is False or any(j.agrees is False for j in judged)
+    agrees = False if disagrees else None if why is not None else True
     return Prediction(rule=RULE, modes=judged, omega_b=omega_b_rings(nu_breve),
                       undetermined=undetermined, theory_consistent=consistent,
-                      agrees=bool(judged and undetermined == 0 and consistent is not False
-                                  and all(j.agrees for j in judged)))
+                      agrees=agrees, undetermined_why=why, least_mission_steps=least)
+
+
+def undetermined_words(judged: list[ModeJudgement], window: int, dt: float,
+                       least_steps: int | None) -> tuple[str | None, int | None]:
+    """(what leaves the verdict undetermined, the least mission steps that would determine
+    it) for modes ``judged`` over a window of ``window`` steps: too short a window names the
+    mission that would do (eq. 36's MIN_STEPS); a still coordinate (no motion above the
+    numbers' resolution) or non-finite data name no duration."""
+    if not judged:
+        return "no damping mode to judge", None
+    reasons = [j.measured.undetermined for j in judged if j.agrees is None]
+    if not reasons:
+        return None, None
+    if SHORT in reasons:
+        needed = f"the {MIN_STEPS} steps a ring's verdict needs (eq. 36)"
+        if least_steps is None:
+            return f"the analysis window holds {window} steps, fewer than {needed}", None
+        return (f"the analysis window holds {window} steps, fewer than {needed}: a mission of "
+                f"at least {least_steps} steps ({least_steps * dt:.4g} s at dt {dt:g} s) "
+                f"would determine it", least_steps)
+    if NON_FINITE in reasons:
+        return (f"{reasons.count(NON_FINITE)} mode(s)' coordinates hold non-finite values "
+                f"in the window"), None
+    return (f"{len(reasons)} mode(s)' coordinates show no motion above the numbers' "
+            f"resolution (a still robot): nothing to determine, at any duration"), None
 
 
 def _driver(measured: Ring, modal: Ring, unstable: list[tuple[ModeLoop, tuple[Ring, Ring]]]

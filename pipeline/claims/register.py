@@ -28,9 +28,10 @@ wrote, imported by name (``{imported: NAME}``: ``<logs>/imported/NAME/run.parque
 ``controller: SPEC`` when its controller is declared); its PATHs are its record's
 (``ImportedRecord``): it has no spec but its robot and step, and no controller's columns.
 A file may ``extends:`` another
-(by path relative to itself): its ``runs``, ``sweeps`` and ``montecarlo`` override the
-parent's by name, its
-``claims`` are added after the parent's.
+(by path relative to itself), as a JSON Merge Patch of it (RFC 7386, :mod:`pipeline.merge_patch`):
+its ``runs``, ``sweeps``, ``montecarlo`` and ``power`` entries merge into the parent's by name
+and key by key, ``null`` deletes an inherited entry or key, and a ``claims`` list replaces the
+parent's whole (left out, the parent's claims are inherited).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.errors import SpecError
-from pipeline.spec import deep_merge
+from pipeline.merge_patch import merge_patch
 from pipeline.yamlfile import read_yaml
 
 
@@ -203,12 +204,7 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     base = _read(path.parent / str(parent), (*chain, path))
     if "note" in base and "note" not in data:  # the parent's note file, seen from here
         base["note"] = str((path.parent / str(parent)).resolve().parent / base["note"])
-    merged = deep_merge(base, {k: v for k, v in data.items()
-                               if k not in ("claims", "runs", "sweeps", "montecarlo", "power")})
-    for key in ("runs", "sweeps", "montecarlo", "power"):  # an entry overrides the parent's
-        merged[key] = {**base.get(key, {}), **data.get(key, {})}
-    merged["claims"] = list(base.get("claims", [])) + list(data.get("claims", []))
-    return merged
+    return merge_patch(base, data)
 
 
 def _where(loc: tuple, data: dict) -> str:

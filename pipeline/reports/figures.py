@@ -516,10 +516,11 @@ def inertia_map(table: Path, path: Path) -> str | None:
     missing = [c for c in need if c not in df]
     if missing:
         return f"{table}: no column {', '.join(missing)}"
-    df = df[df["status"] == "complete"].dropna(subset=need).sort_values("I_zz_bus")
+    df = df[df["status"] == "complete"].dropna(subset=need[:3]).sort_values("I_zz_bus")
     if df.empty:
         return f"{table}: no complete point"
-    crit = float(df["bus_critical_I_zz"].median())
+    # None where no crossing was found for a point (the bus-yaw mode off its closed form).
+    crit = float(df["bus_critical_I_zz"].dropna().median())
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), layout="constrained")
     ring = df["bus_rate_lag1"] < 0
     for ax, col, ttl, ylab in (
@@ -529,8 +530,9 @@ def inertia_map(table: Path, path: Path) -> str | None:
         ax.plot(df["I_zz_bus"], df[col], "-", color="0.6", lw=0.8)
         ax.plot(df["I_zz_bus"][ring], df[col][ring], "s", color="tab:red", label="r₁ < 0")
         ax.plot(df["I_zz_bus"][~ring], df[col][~ring], "o", color="tab:green", label="r₁ ≥ 0")
-        ax.axvline(crit, color="k", ls="--", lw=0.8,
-                   label=f"predicted I_zz,bus = dt·D_b/2 = {crit:.4g} kg·m²")
+        if np.isfinite(crit):
+            ax.axvline(crit, color="k", ls="--", lw=0.8,
+                       label=f"predicted I_zz,bus at dt·μ_bus = 2: {crit:.4g} kg·m²")
         ax.set_xscale("log")
         ax.set(title=ttl, xlabel="I_zz,bus (kg·m²)", ylabel=ylab)
     a2.set_yscale("log")

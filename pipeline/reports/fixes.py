@@ -35,7 +35,7 @@ class FixRow:
     phase_margin_deg: float | None
     delay_margin_ms: float
     rings: str  # the modes that ring of their own in the data ("" none)
-    agrees: bool
+    agrees: bool | None  # None: undetermined (eq. 36)
     pointing_err_deg_max: float
     boresight_err_deg_max: float
     steps_per_s: float
@@ -56,14 +56,24 @@ class FixTable:
         return [r for r in self.rows if r.verdict == FIX]
 
 
-def _verdict(meets: bool, rings: list[str], agrees: bool, least: str, gm: float,
-             below_floor: int, window_steps: int, left_range: str = "") -> str:
+def agreement_words(p) -> str:
+    """How theory and data compare mode by mode for a ``Prediction`` (eq. 36), in words."""
+    if p.agrees is None:
+        return f"cannot be compared mode by mode: {p.undetermined_why}"
+    return "agree mode by mode" if p.agrees else "DISAGREE mode by mode"
+
+
+def _verdict(meets: bool, rings: list[str], agrees: bool | None, least: str, gm: float,
+             below_floor: int, window_steps: int, left_range: str = "",
+             undetermined_why: str | None = None) -> str:
     # The theory (eqs. 21, 34, 35) is the loop's linearisation above the damped inverse's
     # floor; a run that spends window steps below it flew another loop there, so neither its
     # margins nor its agreement speak for those steps: no verdict, least of all "fix".
     if below_floor:
         return (f"not judged: below the damped inverse's floor on {below_floor} of "
                 f"{window_steps} window steps, where the theory does not hold")
+    if agrees is None:
+        return f"undetermined: {undetermined_why}"
     if not agrees:
         return "theory and data disagree"
     if rings:
@@ -99,7 +109,7 @@ def fix_row(r: RunData) -> FixRow:
         boresight_err_deg_max=rec.metrics.boresight_err_deg_max, steps_per_s=1.0 / rec.dt,
         below_floor=below, window_steps=steps,
         verdict=_verdict(meets, rings, p.agrees, least.symbol, least.margins.gain_margin_db,
-                         below, steps, range_words(rec.joint_ranges)))
+                         below, steps, range_words(rec.joint_ranges), p.undetermined_why))
 
 
 def _loop_words(plant: str, delay: int) -> str:
@@ -197,8 +207,12 @@ def decisions(runs: list[RunData]) -> list[Decision]:
         t = _loop_of_record([x for x in tables if x.robot == robot], by_name)
         bad = next((r for r in t.rows if r.rings), None)
         if bad is None:
-            out.append(Decision(robot, f"{robot}: on {t.loop}, no run rings in any mode.",
-                                None, None))
+            # A run the data cannot judge (too short a window, a still robot) rings nowhere
+            # that anyone saw: say so, not "no run rings".
+            unjudged = [r for r in t.rows if r.agrees is None]
+            out.append(Decision(robot, f"{robot}: on {t.loop}, no run rings in any mode"
+                                + ("".join(f"; {r.run} is {r.verdict}" for r in unjudged)
+                                   if unjudged else "") + ".", None, None))
             continue
         rec = by_name[bad.run].record
         ringing = [(m, j) for m, j in zip(rec.theory.modes, rec.prediction.modes, strict=True)
@@ -210,7 +224,7 @@ def decisions(runs: list[RunData]) -> list[Decision]:
                                              for m, _ in ringing)
                    + f" ring over {ringing[0][1].measured.period_steps:.3g} steps"
                    + (f", held by {', '.join(sorted(held))}" if held else "")
-                   + f"; theory and data {'agree' if bad.agrees else 'DISAGREE'} mode by mode."
+                   + f"; theory and data {agreement_words(rec.prediction)}."
                    + range_mark(bad.run, rec.joint_ranges))
         fixes = sorted(t.fixes, key=lambda r: (r.steps_per_s, -r.gain_margin_db))
         if fixes:

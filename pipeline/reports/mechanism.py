@@ -94,6 +94,8 @@ def _verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
                        f"flown disagree on its stability (spectral radius "
                        f"{th.spectral_radius:.4g}; eq. 34 keeps the stiffness the modes drop): "
                        "the modes cannot say which must ring.")
+    if p.agrees is None:
+        return Verdict("inconclusive", f"Undetermined: {p.undetermined_why}.")
     if not p.agrees:
         wrong = [j.mode for j in p.modes if j.agrees is False]
         return Verdict("inconclusive", "Theory and data disagree mode by mode"

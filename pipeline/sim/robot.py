@@ -111,7 +111,21 @@ class GiordanoRobot:
         """The robot card at configuration q, with the spec's bus and camera orientation
         damping gains (eq. 21)."""
         gains = self.spec.controller.gains
-        return robot_card(self.model, q, gains.bus.D, gains.cam_ori.D, self.frame_id)
+        return robot_card(self.model, q, gains.bus.D, gains.cam_ori.D, self.frame_id,
+                          self.bus_yaw_mode_rate(q))
+
+    def bus_yaw_mode_rate(self, q: np.ndarray) -> float:
+        """μ of the bus-yaw damping mode of (D̆, M̆) at q (eq. 21): of the modes of M̆⁻¹D̆ with
+        the spec's gains, the one with the largest share d_i e_i²/μ on ω_b,z."""
+        from pipeline.sim.base_controller import block_gains
+        from pipeline.sim.stability import BUS_YAW_AXIS, damping_modes
+
+        M = np.asarray(self.terms(q, np.zeros(self.model.nv)).reduced_inertia)
+        _, D = block_gains(self.spec.controller, 1.0, self.shape.null_space_dim)
+        d = np.diag(D)
+        modes = damping_modes(M, D)
+        yaw = max(modes, key=lambda m: d[BUS_YAW_AXIS] * m.vector[BUS_YAW_AXIS] ** 2 / m.mu)
+        return float(yaw.mu)
 
     # -- configurations -------------------------------------------------------------------
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:

@@ -92,6 +92,17 @@ def _stderr_of_c_code() -> Iterator[Callable[[], list[str]]]:
             lines += buf.read().decode(errors="replace").splitlines()
 
 
+_WARNED: set[str] = set()
+
+
+def _warn_once(line: str) -> None:
+    """A warning on stderr, once per process: the loader runs for every mission and
+    analysis, the terminal should not repeat it."""
+    if line not in _WARNED:
+        _WARNED.add(line)
+        print(line, file=sys.stderr)
+
+
 def load_robot_model(path: Path | str, camera_frame: str,
                      bus_inertia_scale: float = 1.0,
                      package_dirs: tuple[Path, ...] = (),
@@ -119,7 +130,9 @@ def load_robot_model(path: Path | str, camera_frame: str,
     camera_frame_id(model, camera_frame, path)
     reduced = _locked(model, dict(locked_joints or {}), path)
     arm_joints(reduced, camera_frame, path)
-    crosscheck_robot_file(path, model, camera_frame, package_dirs)
+    check = crosscheck_robot_file(path, model, camera_frame, package_dirs)
+    for note in check.notes:  # what the cross-parse left out (a missing mesh), said once
+        _warn_once(f"warning: {path}: {note}")
     model = reduced
     model.gravity.setZero()
     if inertial:
@@ -314,8 +327,14 @@ class RobotCard:
     pan_axis_offset: float  # distance of the bus CoM from that axis, m
     I_zz_bus: float  # the bus body's inertia about that axis, kg·m²
     D_b: float  # bus damping gain, N·m·s/rad
-    mu_bus: float  # D_b / I_zz,bus, 1/s
+    mu_bus: float  # the bus-yaw rate that holds (mu_bus_rule): the closed form or the mode's
     dt_star_bus: float  # 2 / mu_bus, s
+    mu_bus_closed_form: float = 0.0  # D_b / I_zz,bus, 1/s: exact when the bus CoM is on â
+    # The bus-yaw damping mode of (D̆, M̆) at this configuration (eq. 21: the mode with the
+    # largest ω_b,z share), 1/s; None where M̆ was not at hand.
+    mu_bus_mode: float | None = None
+    bus_closed_form_holds: bool = True  # the bus CoM on the first joint's axis, â along z_b
+    mu_bus_rule: str = ""  # which of the two mu_bus is, and why
     # The camera roll about the last arm joint's axis: the bodies it carries (the wrist link
     # and the payload, one inertia in the model) and the camera frame's alignment with it.
     roll_axis_offset: float = 0.0  # distance of that inertia's CoM from the axis, m
@@ -341,6 +360,25 @@ class RobotCard:
                 f"its base link is taken for the bus; mount the arm on a bus link")
 
 
+def bus_rate_rule(closed_form: float, mode: float | None, holds: bool, offset: float,
+                  axis: np.ndarray) -> tuple[float, str]:
+    """(the bus-yaw rate that holds, which it is and why), from the closed form D_b/I_zz,bus,
+    the bus-yaw damping mode's rate of (D̆, M̆) and whether the closed form's condition holds
+    (eq. 21)."""
+    where = (f"the bus CoM {offset:.3g} m from the first joint's axis, the axis at "
+             f"|cos| {abs(axis[2]):.6f} to z_b")
+    if holds:
+        return closed_form, (f"closed form D_b/I_zz,bus ({where}: exact on the axis)"
+                             + (f"; the mode of (D̆, M̆) {mode:.6g} 1/s"
+                                if mode is not None else ""))
+    if mode is None:
+        return closed_form, (f"closed form D_b/I_zz,bus, which does NOT hold ({where}); the "
+                             f"bus-yaw damping mode of (D̆, M̆) not computed here")
+    return mode, (f"the bus-yaw damping mode of (D̆, M̆) (eq. 21): the closed form "
+                  f"D_b/I_zz,bus = {closed_form:.4g} 1/s does not hold ({where}; "
+                  f"{100.0 * (closed_form / mode - 1.0):+.3g} % off)")
+
+
 def _joint_axis(model: pin.Model, j: int) -> np.ndarray:
     """The unit axis of revolute joint j in its own frame."""
     joint = model.joints[j]
@@ -360,8 +398,15 @@ def _inertia_about(inertia: pin.Inertia, axis: np.ndarray, point: np.ndarray
     return float(axis @ inertia.inertia @ axis + inertia.mass * d**2), d
 
 
+# The bus-yaw closed form holds when the bus CoM is on the first joint's axis and that axis is
+# the bus z: within these (m, and 1 − |â·z_b|), the round-off of a file's numbers.
+ON_AXIS_M = 1e-9
+ALIGNED = 1e-12
+
+
 def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
-               camera_frame: int | None = None) -> RobotCard:
+               camera_frame: int | None = None, mu_bus_mode: float | None = None
+               ) -> RobotCard:
     """The card of ``model`` at configuration q with bus damping gain D_b and camera
     orientation damping gain D_o (eq. 21).
 
@@ -376,6 +421,12 @@ def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
     a fixed bus, camera position and CoM: an eigen-direction of M̆ with inertia I_roll, and
     μ_roll = D_o / I_roll. The card gives the offsets and the alignment, so a reader sees
     when the closed form applies.
+
+    ``mu_bus_mode``: the bus-yaw damping mode's rate of (D̆, M̆) at q (eq. 21), when the caller
+    has M̆. The card's ``mu_bus`` is the value that holds: the closed form where the bus CoM is
+    on â and â is the bus z (``ON_AXIS_M``, ``ALIGNED``), else the mode's (the closed form
+    then kept beside it with its error), else, with no mode given, the closed form marked as
+    not holding.
     """
     data = model.createData()
     com = pin.centerOfMass(model, data, q)
@@ -396,12 +447,16 @@ def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
         cos = float(abs(axis_t @ oMf.rotation[:, 2]))
         cam_offset = float(np.linalg.norm(np.cross(oMf.translation - oMj.translation, axis_t)))
     mu_roll = D_o / I_roll
+    holds = bool(offset <= ON_AXIS_M and abs(axis[2]) >= 1.0 - ALIGNED)
+    used, rule = bus_rate_rule(mu, mu_bus_mode, holds, offset, axis)
     return RobotCard(
         total_mass=float(sum(i.mass for i in model.inertias)),
         com_b=(R_tb.T @ (com - data.oMi[1].translation)).tolist(),
         bus_mass=float(bus.mass), bus_com_b=bus.lever.tolist(),
         bus_inertia=bus.inertia.tolist(), pan_axis_b=axis.tolist(), pan_axis_offset=offset,
-        I_zz_bus=I_axis, D_b=float(D_b), mu_bus=mu, dt_star_bus=2.0 / mu,
+        I_zz_bus=I_axis, D_b=float(D_b), mu_bus=used, dt_star_bus=2.0 / used,
+        mu_bus_closed_form=mu, mu_bus_mode=mu_bus_mode, bus_closed_form_holds=holds,
+        mu_bus_rule=rule,
         roll_axis_offset=roll_offset, roll_boresight_cos=cos, roll_camera_offset=cam_offset,
         I_roll=I_roll, D_o=float(D_o), mu_roll=mu_roll,
         dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"),
