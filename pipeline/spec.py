@@ -2,8 +2,9 @@
 
 A spec is a path to a YAML file or a bare name looked up on the spec search path
 (:mod:`pipeline.paths`: the user's ``BREVE_SPEC_PATH``, then the specs shipped in
-``specs/``). A spec may ``extends:`` another spec by name (looked up beside it first);
-the child's keys override the parent's, mappings merging recursively. ``robot.file`` is looked
+``specs/``). A spec may ``extends:`` another spec by name (looked up beside it first), as a
+JSON Merge Patch of it (RFC 7386, :mod:`pipeline.merge_patch`): mappings merge key by key,
+``null`` deletes an inherited key, any other value replaces it. ``robot.file`` is looked
 up the same way, beside the spec first. The resolved spec is hashed canonically: the same
 content gives the same hash whatever the key order or the file it came from (the name and
 ``extends`` are not part of the content); the robot file's content is keyed by its own hash
@@ -514,10 +515,18 @@ def key_sources(path: Path) -> tuple[dict[str, str], dict[str, str]]:
     every leaf of a spec's merged mapping (``validate --explain``)."""
     chain = spec_chain(path)
     own = [(p.stem, leaf_keys(data)) for p, data in chain]
+    merged = leaf_keys(raw_spec(path))
     sources = {}
-    for key in leaf_keys(raw_spec(path)):
-        sources[key] = next(name for name, leaves in own if key in leaves)
-    deleted = {key: p.stem for p, data in reversed(chain) for key in deleted_keys(data)}
+    for key in merged:
+        # A mapping whose every key a patch deleted is an empty leaf no file writes: the
+        # nearest spec that touches it (or a key inside it) made it so.
+        sources[key] = next((name for name, leaves in own if key in leaves), None) or next(
+            name for name, leaves in own if any(k.startswith(f"{key}.") for k in leaves)
+            or key in leaves)
+    # A patch's nulls (not the root's, whose nulls are values), unless a nearer spec sets the
+    # key again.
+    deleted = {key: p.stem for p, data in reversed(chain[:-1]) for key in deleted_keys(data)
+               if not any(k == key or k.startswith(f"{key}.") for k in merged)}
     return sources, deleted
 
 

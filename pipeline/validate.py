@@ -113,6 +113,8 @@ def report_lines(v: Validation) -> list[str]:
             f"last joint's axis; its CoM {c.roll_axis_offset:.2g} m and the camera "
             f"{c.roll_camera_offset:.2g} m from the axis, boresight |cos| "
             f"{c.roll_boresight_cos:.6f}: exact when both offsets are 0 and |cos| = 1)",
+            *([f"  continuous joints (no range; flown as one unwrapped angle each): "
+               f"{', '.join(c.continuous_joints)}"] if c.continuous_joints else []),
             *([f"  warning: {c.light_bus}"] if c.light_bus else [])]
 
 

@@ -87,3 +87,23 @@ def test_validate_explain_names_each_keys_source(tmp_path):
     assert "robot.damped_inverse" not in r.stdout.split("keys of child")[1].split(
         "deleted by")[0]
     assert "  deleted by child (null): robot.damped_inverse" in lines
+
+
+def test_explain_credits_an_emptied_mapping_and_lists_only_real_deletions(tmp_path):
+    """A patch that deletes every key of an inherited mapping leaves an empty mapping no
+    file writes: it is the patch's; a key deleted and set again by a nearer spec is not
+    listed as deleted."""
+    from pipeline.spec import key_sources
+
+    (tmp_path / "bare.yaml").write_text(
+        "extends: panda_nominal\nrobot: {locked_joints: {panda_finger_joint1: null, "
+        "panda_finger_joint2: null}, damped_inverse: null}\n")
+    (tmp_path / "again.yaml").write_text(
+        "extends: bare\nrobot: {damped_inverse: {floor: 0.03}}\n")
+    sources, deleted = key_sources(tmp_path / "bare.yaml")
+    assert sources["robot.locked_joints"] == "bare"
+    assert set(deleted) == {"robot.locked_joints.panda_finger_joint1",
+                            "robot.locked_joints.panda_finger_joint2", "robot.damped_inverse"}
+    sources, deleted = key_sources(tmp_path / "again.yaml")
+    assert sources["robot.damped_inverse.floor"] == "again"
+    assert "robot.damped_inverse" not in deleted

@@ -74,31 +74,34 @@ def test_fingers_refused_by_name_then_locked():
     assert robot_shape(load(PANDA, "panda_hand", **FINGERS)).n == 7
 
 
-def test_continuous_joints_refused_by_name_and_lockable():
-    msg = _refusal(KINOVA, "j2s6s200_end_effector")
-    assert ("continuous joints j2s6s200_joint_1, j2s6s200_joint_4, j2s6s200_joint_6"
-            in msg), msg
-    # Locked as the refusal advises, the continuous joints are held at their angles (cos and
-    # sin in Pinocchio): the camera placement is the full model's at those angles.
+def test_continuous_joints_are_flown_as_one_angle_and_lockable():
+    """The Kinova's continuous joints (1, 4 and 6; issue 51) load as revolute joints of one
+    angle without a range: a six-joint arm, nq 13. Locked, they are held at their angles: the
+    camera placement is Pinocchio's own model's at those angles (its joints' cos and sin)."""
+    model = load(KINOVA, "j2s6s200_end_effector")
+    assert robot_shape(model).n == 6 and (model.nq, model.nv) == (13, 12)
+    from pipeline.sim.robot_file import _locked, unbounded_joints
+
+    assert unbounded_joints(model) == ["j2s6s200_joint_1", "j2s6s200_joint_4",
+                                       "j2s6s200_joint_6"]
     angles = {"j2s6s200_joint_1": 0.3, "j2s6s200_joint_4": -1.2, "j2s6s200_joint_6": 2.5}
     full = pin.buildModelFromUrdf(str(KINOVA), pin.JointModelFreeFlyer())
-    reduced = pin.buildReducedModel(full, [full.getJointId(n) for n in angles], pin.neutral(full))
     assert "3 arm joints" in _refusal(KINOVA, "j2s6s200_end_effector", **angles)
-    from pipeline.sim.robot_file import _locked
+    from pipeline.sim.robot_file import as_revolute
 
-    model = _locked(full, angles, KINOVA)
-    assert model.nq == reduced.nq == 10
+    locked = _locked(as_revolute(full)[0], angles, KINOVA)
+    assert locked.nq == 10
     q_f = pin.neutral(full)
     for name, a in angles.items():
         i = full.joints[full.getJointId(name)].idx_q
         q_f[i:i + 2] = np.cos(a), np.sin(a)
-    data_r, data_f = model.createData(), full.createData()
-    pin.framesForwardKinematics(model, data_r, pin.neutral(model))
+    data_r, data_f = locked.createData(), full.createData()
+    pin.framesForwardKinematics(locked, data_r, pin.neutral(locked))
     pin.framesForwardKinematics(full, data_f, q_f)
     fid = "j2s6s200_end_effector"
-    np.testing.assert_allclose(data_r.oMf[model.getFrameId(fid, pin.FrameType.BODY)].homogeneous,
-                               data_f.oMf[full.getFrameId(fid, pin.FrameType.BODY)].homogeneous,
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        data_r.oMf[locked.getFrameId(fid, pin.FrameType.BODY)].homogeneous,
+        data_f.oMf[full.getFrameId(fid, pin.FrameType.BODY)].homogeneous, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize(("locked", "needle"), [

@@ -36,8 +36,8 @@ def test_a_hundred_step_mission_is_undetermined_and_names_the_mission_that_would
 
 
 def test_a_still_robot_is_undetermined_without_a_duration():
-    """Synthetic ν̆ with a known answer: no motion at all over 1000 steps (a still robot);
-    then one mode's coordinate ringing and the rest still: still undetermined, by stillness."""
+    """Synthetic ν̆ with known answers: no motion at all over 1000 steps (a still robot); one
+    mode's coordinate moving slowly and the rest still; a window too short."""
     spec = load_spec("nominal")
     M = np.diag([0.015625, 0.1, 0.1, 2.0, 2.0, 2.0, 0.01, 0.01, 0.01])
     D = np.eye(9)
@@ -48,6 +48,14 @@ def test_a_still_robot_is_undetermined_without_a_duration():
     assert "no motion above the numbers' resolution (a still robot)" in p.undetermined_why
     assert "steps" not in p.undetermined_why.split("(a still robot)")[1]
     assert ring(still[:, 0], "x", "rad/s").undetermined == STILL
+    # One mode's coordinate moving slowly (quiet, as predicted), the others still: still
+    # undetermined, by those eight, and not "a still robot".
+    moving = still.copy()
+    moving[:, 2] += 0.1 * np.sin(2 * np.pi * np.arange(1000) / 500)
+    part = judge(modes, M, moving, 0.01, 0, spec.controller.limits, 0.5, least_steps=399)
+    assert part.agrees is None and part.undetermined == 8
+    assert part.undetermined_why.startswith("8 of 9 modes' coordinates show no motion")
+    assert "still robot" not in part.undetermined_why
     short = judge(modes, M, still[:MIN_STEPS - 1], 0.01, 0, spec.controller.limits, 0.5,
                   least_steps=399)
     assert short.agrees is None and short.least_mission_steps == 399

@@ -214,7 +214,7 @@ def analyze_log(log: VerifiedLog, window_start: float | None = None,
         bus_mode=rs.BusMode(dt_mu_bus=dt * card.mu_bus,
                             critical_I_zz=(dt * card.D_b / 2 if card.bus_closed_form_holds
                                            else None)),
-        mu_max_log=mu_max_along(log, dt, card.mu_bus, robot.floor),
+        mu_max_log=mu_max_along(log, dt, card.mu_bus_closed_form, robot.floor),
         modes_along=fastest_modes_along(robot, spec, log),
         joint_ranges=joint_range_record(log, JointRanges.of(robot.model), dt),
     )

@@ -120,7 +120,8 @@ def mode_lines(modes: list[ModeLoop], prediction: Prediction, plant: str, delay:
     data, or fails the margins, on a line; the others counted."""
     late = f", {delay} step of delay" if delay else ""
     verdict = ("agree" if prediction.agrees else "DISAGREE" if prediction.agrees is False
-               else f"undetermined on {prediction.undetermined}")
+               else f"undetermined on {prediction.undetermined} of {len(prediction.modes)} "
+                    f"modes")
     lines = [f"  modes of the loop as flown ({plant} plant{late}): theory and data {verdict}"]
     if prediction.agrees is None and prediction.undetermined_why:
         lines.append(f"    undetermined: {prediction.undetermined_why}")

@@ -240,8 +240,9 @@ def judge(modes: list[ModeLoop], M_breve: np.ndarray, nu_breve: np.ndarray, dt: 
     undetermined = sum(j.agrees is None for j in judged)
     consistent = (None if map_radius is None else
                   bool((map_radius >= mg.UNIT) == any(m.rings for m in modes)))
-    why, least = undetermined_words(judged, nu_breve.shape[0], dt, least_steps)
     disagrees = consistent is False or any(j.agrees is False for j in judged)
+    why, least = ((None, None) if disagrees else
+                  undetermined_words(judged, nu_breve.shape[0], dt, least_steps))
     agrees = False if disagrees else None if why is not None else True
     return Prediction(rule=RULE, modes=judged, omega_b=omega_b_rings(nu_breve),
                       undetermined=undetermined, theory_consistent=consistent,
@@ -269,8 +270,9 @@ def undetermined_words(judged: list[ModeJudgement], window: int, dt: float,
     if NON_FINITE in reasons:
         return (f"{reasons.count(NON_FINITE)} mode(s)' coordinates hold non-finite values "
                 f"in the window"), None
-    return (f"{len(reasons)} mode(s)' coordinates show no motion above the numbers' "
-            f"resolution (a still robot): nothing to determine, at any duration"), None
+    robot = " (a still robot)" if len(reasons) == len(judged) else ""
+    return (f"{len(reasons)} of {len(judged)} modes' coordinates show no motion above the "
+            f"numbers' resolution{robot}: nothing to determine there, at any duration"), None
 
 
 def _driver(measured: Ring, modal: Ring, unstable: list[tuple[ModeLoop, tuple[Ring, Ring]]]

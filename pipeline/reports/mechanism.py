@@ -100,13 +100,17 @@ def _verdict(run: CompleteRecord, other: CompleteRecord) -> Verdict:
         wrong = [j.mode for j in p.modes if j.agrees is False]
         return Verdict("inconclusive", "Theory and data disagree mode by mode"
                        + (f" ({', '.join(wrong)})" if wrong else
-                          f" ({p.undetermined} undetermined)") + ".")
+                          " (the modes' loops against the map of eq. 34)") + ".")
     if unstable:
-        smooth = not any(m.rings for m in other.theory.modes) and other.prediction.agrees
+        causal = other.prediction
+        test = ("; the causal run cannot judge it: " + str(causal.undetermined_why) + "."
+                if causal.agrees is None else
+                "; the causal test removes it." if (
+                    causal.agrees and not any(m.rings for m in other.theory.modes)) else
+                "; the causal test does not remove it.")
         return Verdict("ripple", f"Unstable as flown ({th.update_order}, dt = {run.dt:g} s, "
                        f"{run.integrator}): {ringing_words(run)}; theory and data agree mode "
-                       f"by mode" + ("; the causal test removes it." if smooth else
-                                     "; the causal test does not remove it."))
+                       f"by mode" + test)
     if run.integrator == "imex":
         return Verdict("fix", "The implicit damping (imex) keeps every mode stable at the same "
                        "step and gains; theory and data agree mode by mode.")

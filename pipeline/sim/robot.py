@@ -123,9 +123,12 @@ class GiordanoRobot:
         M = np.asarray(self.terms(q, np.zeros(self.model.nv)).reduced_inertia)
         _, D = block_gains(self.spec.controller, 1.0, self.shape.null_space_dim)
         d = np.diag(D)
-        modes = damping_modes(M, D)
-        yaw = max(modes, key=lambda m: d[BUS_YAW_AXIS] * m.vector[BUS_YAW_AXIS] ** 2 / m.mu)
-        return float(yaw.mu)
+
+        def yaw_share(m) -> float:  # d_z e_z²/Σ d_i e_i² (= /μ); an undamped mode by e_z²
+            w = d * m.vector ** 2 if m.mu > 0 else m.vector ** 2
+            return float(w[BUS_YAW_AXIS] / w.sum())
+
+        return float(max(damping_modes(M, D), key=yaw_share).mu)
 
     # -- configurations -------------------------------------------------------------------
     def full_configuration(self, q_joint: np.ndarray) -> np.ndarray:

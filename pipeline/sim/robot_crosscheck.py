@@ -190,13 +190,29 @@ def _mesh_file(spec, mesh, path: Path, package_dirs: tuple[Path, ...]) -> Path |
     return cand if cand.is_file() else None
 
 
+# The mesh formats MuJoCo decodes without a plugin; a ROS description's Collada (.dae) is not
+# one of them.
+MUJOCO_MESH_SUFFIXES = (".stl", ".obj", ".msh")
+
+
+def _unusable(spec, mesh, path: Path, package_dirs: tuple[Path, ...]) -> str | None:
+    """Why MuJoCo cannot use a mesh (missing, or a format it does not decode), or None."""
+    found = _mesh_file(spec, mesh, path, package_dirs)
+    if found is None:
+        return "missing"
+    if found.suffix.lower() not in MUJOCO_MESH_SUFFIXES:
+        return f"in a format MuJoCo does not read ({found.suffix})"
+    return None
+
+
 def _drop_missing_meshes(spec, path: Path, package_dirs: tuple[Path, ...]) -> list[str]:
     import mujoco
 
     notes = []
     from_geoms = spec.compiler.inertiafromgeom != mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     for mesh in list(spec.meshes):
-        if _mesh_file(spec, mesh, path, package_dirs) is not None:
+        why = _unusable(spec, mesh, path, package_dirs)
+        if why is None:
             continue
         users = [g for g in spec.geoms if g.meshname == mesh.name]
         for g in users:
@@ -205,7 +221,7 @@ def _drop_missing_meshes(spec, path: Path, package_dirs: tuple[Path, ...]) -> li
                 mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
             if from_geoms and (forced or not body.explicitinertial):
                 raise SpecError(f"{path}: body {body.name!r}: its inertia comes from its "
-                                f"geoms, and its mesh {mesh.file!r} is missing (give the body "
+                                f"geoms, and its mesh {mesh.file!r} is {why} (give the body "
                                 f"an explicit inertial, or the mesh"
                                 + (", robot.package_dirs for package:// URIs"
                                    if mesh.file.startswith("package://") else "") + ")")
@@ -213,7 +229,7 @@ def _drop_missing_meshes(spec, path: Path, package_dirs: tuple[Path, ...]) -> li
         for g in users:
             spec.delete(g)
         spec.delete(mesh)
-        notes.append(f"mesh {mesh.file} missing, not needed: "
+        notes.append(f"mesh {mesh.file} {why}, not needed: "
                      + (f"the inertia of {', '.join(owners)} is explicit" if owners else
                         "no geom uses it"))
     return notes

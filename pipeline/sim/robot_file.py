@@ -12,7 +12,6 @@ robot in the file.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 import tempfile
@@ -122,7 +121,7 @@ def load_robot_model(path: Path | str, camera_frame: str,
     is about the file.
     """
     path = Path(path)
-    model = _parse(path)
+    model, _ = as_revolute(_parse(path))
     kinds = [j.shortname() for j in model.joints[1:]]
     if model.njoints < 2 or kinds[0] != "JointModelFreeFlyer":
         raise SpecError(f"{path}: the root joint must be a free joint (the bus); found "
@@ -146,8 +145,47 @@ def load_robot_model(path: Path | str, camera_frame: str,
 
 # Pinocchio's one-coordinate revolute joints: about x, y or z of the joint frame, or about an
 # axis the file gives. A URDF "continuous" joint is Pinocchio's unbounded revolute (RUB: two
-# coordinates, cos and sin, for one velocity), refused below by name.
+# coordinates, cos and sin, for one velocity); the loader flies it as the revolute joint of the
+# same axis without limits (:func:`as_revolute`).
 REVOLUTE_KINDS = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
+_REVOLUTE_OF = {"JointModelRUBX": pin.JointModelRX, "JointModelRUBY": pin.JointModelRY,
+                "JointModelRUBZ": pin.JointModelRZ}
+
+
+def as_revolute(model: pin.Model) -> tuple[pin.Model, list[str]]:
+    """``model`` with each continuous joint (Pinocchio's unbounded revolute, its angle held as
+    (cos θ, sin θ)) replaced by the revolute joint of the same axis, placement and body with
+    the range (−∞, ∞), and the names of those joints; ``model`` itself when it has none.
+
+    One coordinate per joint, the angle θ itself: Pinocchio's integrate adds v·dt to it, so a
+    joint turning past ±π stays continuous in q (unwrapped), and the kinematics and dynamics
+    are those of the (cos, sin) joint at that angle, to the bit on the collection's Kinova
+    (tests/test_continuous_joints.py). The frames are copied in order (their inertias already
+    in the joints' bodies, not appended again)."""
+    kinds = [model.joints[j].shortname() for j in range(model.njoints)]
+    if not any(k.startswith("JointModelRUB") for k in kinds):
+        return model, []
+    new, names = pin.Model(), []
+    new.name = model.name
+    for j in range(1, model.njoints):
+        joint, kind = model.joints[j], kinds[j]
+        qs = slice(joint.idx_q, joint.idx_q + joint.nq)
+        vs = slice(joint.idx_v, joint.idx_v + joint.nv)
+        lower, upper = model.lowerPositionLimit[qs], model.upperPositionLimit[qs]
+        if kind.startswith("JointModelRUB"):
+            names.append(model.names[j])
+            joint = (_REVOLUTE_OF[kind]() if kind in _REVOLUTE_OF
+                     else pin.JointModelRevoluteUnaligned(joint.axis))
+            lower, upper = np.array([-np.inf]), np.array([np.inf])
+        jid = new.addJoint(model.parents[j], joint, model.jointPlacements[j], model.names[j],
+                           model.upperEffortLimit[vs], model.upperVelocityLimit[vs], lower,
+                           upper)
+        new.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
+        at = new.joints[jid]
+        new.armature[at.idx_v:at.idx_v + at.nv] = model.armature[vs]
+    for frame in list(model.frames)[1:]:
+        new.addFrame(pin.Frame(frame), False)
+    return new, names
 
 
 def _lock(names: list[str]) -> str:
@@ -174,9 +212,10 @@ def camera_frame_id(model: pin.Model, name: str, path: Path | str = "") -> int:
 
 def _locked(model: pin.Model, locked: dict[str, float], path: Path) -> pin.Model:
     """``model`` with the joints named in ``locked`` held at their values (Pinocchio's
-    ``buildReducedModel``; a continuous joint's angle as its cos and sin); a name the file does
-    not have, a joint of several degrees of freedom or a value outside the joint's limits is a
-    SpecError naming the field."""
+    ``buildReducedModel``; a continuous joint, flown as a revolute joint without limits
+    (:func:`as_revolute`), at any angle); a name the file does not have, a joint of several
+    degrees of freedom or a value outside the joint's limits is a SpecError naming the
+    field."""
     if not locked:
         return model
     model = pin.Model(model)  # a copy: the file's model is cross-checked as parsed
@@ -188,10 +227,7 @@ def _locked(model: pin.Model, locked: dict[str, float], path: Path) -> pin.Model
                             f"{', '.join(list(model.names)[2:])})")
         j = model.getJointId(name)
         joint = model.joints[j]
-        if joint.shortname().startswith("JointModelRUB"):
-            # A continuous joint: its angle is held as Pinocchio's (cos, sin), unbounded.
-            q[joint.idx_q:joint.idx_q + 2] = math.cos(value), math.sin(value)
-        elif joint.nq != 1 or joint.nv != 1:
+        if joint.nq != 1 or joint.nv != 1:
             raise SpecError(f"{where}: a {joint.shortname()} joint has {joint.nq} "
                             f"coordinates; only one-coordinate and continuous joints can be "
                             f"locked")
@@ -219,8 +255,9 @@ def arm_joints(model: pin.Model, camera_frame: str, path: Path | str) -> RobotSh
 
     Every joint after the free one must move the camera: it is on the chain from the bus to
     the camera frame (a jaw, a finger or a second branch is not; it is refused by name, to be
-    locked), it is revolute with one coordinate (a continuous joint, two coordinates in
-    Pinocchio, and a prismatic or multi-axis joint are refused by name), and there are at
+    locked), it is revolute with one coordinate (a continuous joint is, once the loader has
+    made it a revolute joint without limits, :func:`as_revolute`; a prismatic or multi-axis
+    joint is refused by name), and there are at
     least :data:`~pipeline.shapes.TASK_DOF` of them (fewer cannot place the camera in six
     degrees of freedom). More is a redundant arm, whose null-space terms are eq. 37's; the
     stages' loader (:func:`load_spec_robot`) refuses it until the loop runs it.
@@ -235,15 +272,8 @@ def arm_joints(model: pin.Model, camera_frame: str, path: Path | str) -> RobotSh
                         f"{camera_frame!r} (not on the chain from the bus to it: a jaw, a "
                         f"finger, another branch); {_lock(off)}")
     kinds = {names[j]: model.joints[j].shortname() for j in range(2, model.njoints)}
-    continuous = [n for n, k in kinds.items() if k.startswith("JointModelRUB")]
-    if continuous:
-        raise SpecError(f"{path}: continuous joint{'s' if len(continuous) > 1 else ''} "
-                        f"{', '.join(continuous)} (two coordinates, cos and sin, in Pinocchio) "
-                        f"{'are' if len(continuous) > 1 else 'is'} not supported: declare "
-                        f"{'them' if len(continuous) > 1 else 'it'} revolute with limits in the "
-                        f"file, or {_lock(continuous)}")
     other = [f"{n} ({k.removeprefix('JointModel')})" for n, k in kinds.items()
-             if k not in REVOLUTE_KINDS and not k.startswith("JointModelRUB")]
+             if k not in REVOLUTE_KINDS]
     if other:
         raise SpecError(f"{path}: not revolute: {', '.join(other)}; the arm's joints must be "
                         f"revolute with one coordinate, or {_lock(other)}")
@@ -348,6 +378,9 @@ class RobotCard:
     # sums (a fixed arm base adds to the bus: μ_bus is not the user's bus alone).
     bus_links: list[str] = field(default_factory=list)
     arm_mass: float = 0.0  # kg, every body the arm joints move
+    # The arm joints without a range: the file's continuous joints (flown as revolute joints
+    # of one unwrapped angle, :func:`as_revolute`) and any joint it leaves unbounded.
+    continuous_joints: list[str] = field(default_factory=list)
 
     @property
     def light_bus(self) -> str | None:
@@ -358,6 +391,17 @@ class RobotCard:
         return (f"the bus body ({', '.join(self.bus_links)}, {self.bus_mass:.4g} kg) is not "
                 f"heavier than the arm ({self.arm_mass:.4g} kg): if the file is a bare arm, "
                 f"its base link is taken for the bus; mount the arm on a bus link")
+
+
+def unbounded_joints(model: pin.Model) -> list[str]:
+    """The arm joints with no range (eq. 42's ``JointRanges``: both limits beyond
+    ``UNLIMITED``): a continuous joint of the file, once :func:`as_revolute` has made it one
+    angle."""
+    from pipeline.joint_ranges import JointRanges
+
+    r = JointRanges.of(model)
+    return [n for n, lo, hi in zip(r.names, r.lower, r.upper, strict=True)
+            if np.isinf(lo) and np.isinf(hi)]
 
 
 def bus_rate_rule(closed_form: float, mode: float | None, holds: bool, offset: float,
@@ -374,7 +418,7 @@ def bus_rate_rule(closed_form: float, mode: float | None, holds: bool, offset: f
     if mode is None:
         return closed_form, (f"closed form D_b/I_zz,bus, which does NOT hold ({where}); the "
                              f"bus-yaw damping mode of (D̆, M̆) not computed here")
-    return mode, (f"the bus-yaw damping mode of (D̆, M̆) (eq. 21): the closed form "
+    return mode, (f"bus-yaw damping mode of (D̆, M̆) (eq. 21): the closed form "
                   f"D_b/I_zz,bus = {closed_form:.4g} 1/s does not hold ({where}; "
                   f"{100.0 * (closed_form / mode - 1.0):+.3g} % off)")
 
@@ -462,4 +506,5 @@ def robot_card(model: pin.Model, q: np.ndarray, D_b: float, D_o: float = 0.0,
         dt_star_roll=2.0 / mu_roll if mu_roll > 0 else float("inf"),
         bus_links=[f.name for f in model.frames
                    if f.type == pin.FrameType.BODY and f.parentJoint == 1],
-        arm_mass=float(sum(i.mass for i in model.inertias[2:])))
+        arm_mass=float(sum(i.mass for i in model.inertias[2:])),
+        continuous_joints=unbounded_joints(model))
