@@ -362,7 +362,8 @@ def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
     assert (out / "figures" / "growth_omega_ripple_unbounded.png").is_file()
     assert (out / "figures" / "rates.png").is_file()
     md = (out / "n6" / "mechanism.md").read_text()
-    assert "## Robot card" in md and "predicted μ_bus = D_b / I_zz,bus" in md
+    assert "## Robot card" in md
+    assert "predicted μ_bus (D_b = 2 N·m·s/rad): the closed form D_b/I_zz,bus" in md
     assert "note's update order" in md or "note's fully" in md
 
 

@@ -389,11 +389,28 @@ def _spectrum(m: theory.MapSpectrum) -> rs.SpectrumRecord:
                                                      imag=m.eigenvalues.imag.tolist()))
 
 
-def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> TheoryAtStep:
-    """Stage 4 at step k: μ, dt·μ_max, dt*, the map of the loop as flown for both integrators
-    (eq. 34: the log's plant and delay), its dominant eigenvalue, every damping mode's loop with
-    its margins (eq. 35), and the dominant mode's velocity direction for the alignment
-    (eq. 27)."""
+class FlownLoop(NamedTuple):
+    """The loop as flown at one logged step (eqs. 13, 21, 34, 41): what each theory of it
+    reads."""
+
+    T: object  # the robot's terms at the step (``Terms``)
+    q: np.ndarray
+    gamma: float
+    K: np.ndarray
+    D: np.ndarray
+    M_b: np.ndarray
+    J_x: np.ndarray
+    K_x: np.ndarray
+    mu: np.ndarray  # the damping rates, ascending (eq. 21)
+    latency: Latency
+    delay: int  # the longest delay flown (eq. 41): each margin falls as the delay grows
+    fraction: float
+    requirement: rs.Requirement
+
+
+def flown_loop(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> FlownLoop:
+    """The loop at step k from the log's q, v and x̃ (eqs. 13, 21): M̆, the gains after the γ
+    derate, the stiffness in the map's coordinates, the damping rates and the delay."""
     row = log.columns(["q", "v", "x_tilde", "s_min_G"], k, k + 1)
     T = robot.terms(row["q"][0], row["v"][0])
     gamma = conditioning_scale(T.s_min_G, spec.controller)
@@ -403,10 +420,48 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     J_x = position_jacobian(theory.task_jacobian(row["x_tilde"][0], T.R_te), shape.n_breve)
     K_x = loop_stiffness(J_x, K, T.gamma_inv, ctrl)
     mu = theory.damping_rates(np.ascontiguousarray(M_b), D)  # the step kernel's layout
-    dt, integ = spec.mission.dt, spec.controller.integrator
-    plant, latency = spec.mission.plant.model, Latency.of(spec.mission.plant)
-    # The frozen loop at the longest delay (eq. 41): each margin falls as the delay grows.
+    latency = Latency.of(spec.mission.plant)
     delay, fraction = latency.worst
+    return FlownLoop(T, row["q"][0], gamma, K, D, M_b, J_x, K_x, mu, latency, delay, fraction,
+                     rs.Requirement(**spec.requirements.model_dump()))
+
+
+class SampleTheory(NamedTuple):
+    """What a Monte Carlo sample's verdict reads of the theory at its step (eq. 39): the
+    flown map's spectral radius, dt·μ_max, every mode's loop with its margins and the latency
+    record; the same numbers as :func:`theory_at_step`'s, without its fix searches and
+    critical step, which no sample's verdict reads."""
+
+    step: int
+    spectral_radius: float
+    dt_mu_max: float
+    modes: list
+    latency: rs.LatencyRecord | None
+
+
+def sample_theory(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> SampleTheory:
+    """:class:`SampleTheory` at step k (eqs. 34, 35, 41c)."""
+    L = flown_loop(robot, spec, log, k)
+    dt, integ, plant = spec.mission.dt, spec.controller.integrator, spec.mission.plant.model
+    own = theory.spectrum(theory.flown_map(L.M_b, L.D, L.K_x, L.J_x, dt, integ, plant, L.delay,
+                                           L.fraction))
+    modes = mode_loops(L.M_b, L.D, dt, integ, L.delay, L.requirement,
+                       mode_stiffness(L.K, spec.controller, robot.shape), L.fraction)
+    return SampleTheory(k, own.spectral_radius, float(dt * L.mu[-1]), modes,
+                        latency_record(L.M_b, L.D, L.K_x, L.J_x, dt, integ, L.latency,
+                                       own.spectral_radius))
+
+
+def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -> TheoryAtStep:
+    """Stage 4 at step k: μ, dt·μ_max, dt*, the map of the loop as flown for both integrators
+    (eq. 34: the log's plant and delay), its dominant eigenvalue, every damping mode's loop with
+    its margins (eq. 35), and the dominant mode's velocity direction for the alignment
+    (eq. 27)."""
+    L = flown_loop(robot, spec, log, k)
+    T, gamma, K, D, M_b, J_x, K_x, mu = L.T, L.gamma, L.K, L.D, L.M_b, L.J_x, L.K_x, L.mu
+    ctrl, shape = spec.controller, robot.shape
+    dt, integ = spec.mission.dt, spec.controller.integrator
+    plant, latency, delay, fraction = spec.mission.plant.model, L.latency, L.delay, L.fraction
     maps = {i: theory.spectrum(theory.flown_map(M_b, D, K_x, J_x, dt, i, plant, delay,
                                                 fraction))
             for i in ("explicit", "imex")}
@@ -419,7 +474,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.bisect_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
                                          delay=delay, fraction=fraction)
-    req = rs.Requirement(**spec.requirements.model_dump())
+    req = L.requirement
     fixes = mode_fixes(M_b, D, dt)
     record = rs.Theory(
         rule="the given step",
@@ -448,7 +503,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         J_x=J_x.tolist(), K_x=K_x.tolist(),
         latency=latency_record(M_b, D, K_x, J_x, dt, integ, latency, own.spectral_radius),
     )
-    return TheoryAtStep(record, direction, row["q"][0])
+    return TheoryAtStep(record, direction, L.q)
 
 
 def flown_order(plant: str, latency: Latency) -> str:

@@ -11,7 +11,8 @@ The requirement a sample passes (every part from the mission spec and the Monte 
 - ω_b's period-2 amplitude (eq. 30, the largest of its three components) over the analysis
   window is at most ``ripple_max``.
 
-The theory is the analysis' own (:func:`pipeline.analysis.stages.theory_at_step`, at the
+The theory is the analysis' own (:func:`pipeline.analysis.stages.sample_theory`: the numbers
+of ``theory_at_step`` a verdict reads, without its fix searches and critical step, at the
 step :func:`representative_step` picks in the window :func:`choose_window` picks), on the log
 the sample made, held in memory: a Monte Carlo of hundreds of missions keeps a small record
 per sample, not its log. The record holds the log's digest (SHA-256 of its columns), so a
@@ -33,7 +34,7 @@ from pipeline.analysis.stages import (
     bus_rate_data,
     choose_window,
     representative_step,
-    theory_at_step,
+    sample_theory,
 )
 from pipeline.shapes import V
 from pipeline.spec import Spec
@@ -137,7 +138,7 @@ def judge_log(robot, spec: Spec, cols: dict[str, np.ndarray], fails: list[str],
     win = choose_window(log.rows, dt, None, spec.name)
     rep = representative_step(cols["s_min_G"][win.start:win.stop],
                               cols["s_min_J"][win.start:win.stop], robot.floor)
-    th = theory_at_step(robot, spec, log, win.start + rep.index).record
+    th = sample_theory(robot, spec, log, win.start + rep.index)
     if th.spectral_radius >= 1.0:
         fails.append("unstable mode")
     if th.latency is not None and not th.latency.mean_square_radius < 1.0:  # eq. 41c

@@ -140,7 +140,8 @@ class GiordanoRobot:
     def gamma_of_joints(self, q_joint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scoring function for the sampler: (q_full, Γ(q_full))."""
         q = self.full_configuration(q_joint)
-        return q, self.terms(q, np.zeros(self.model.nv)).gamma
+        # Γ alone: the kinematic terms (Γ is the same bits as with the dynamics, eqs. 2–6).
+        return q, self.terms(q, np.zeros(self.model.nv), dynamics=False).gamma
 
     def start_configuration(self) -> np.ndarray:
         """The best-conditioned sample on Γ near q̄, else the analytic fallback."""

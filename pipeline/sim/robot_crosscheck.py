@@ -51,6 +51,7 @@ and the likely cause, every time.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field
@@ -101,14 +102,21 @@ def cache_dir() -> Path:
     return user_cache_dir() / "robot-crosscheck"
 
 
+@functools.lru_cache(maxsize=1)
+def _code_identity() -> tuple[bytes, bytes, bytes]:
+    """(pin's version, mujoco's, this module's source), read once per process: reading an
+    installed package's version parses its metadata file, about 9 ms, and every mission and
+    Monte Carlo sample loads its robot."""
+    return (pin.__version__.encode(), metadata.version("mujoco").encode(),
+            Path(__file__).read_bytes())
+
+
 def cache_key(path: Path, camera_frame: str, package_dirs: tuple[Path, ...] = ()) -> str:
     """SHA-256 over the file's bytes, the camera frame, the package folders, the pin and
     mujoco versions and this module's source."""
     h = hashlib.sha256()
     dirs = "\0".join(str(Path(d).resolve()) for d in package_dirs)
-    for part in (path.read_bytes(), camera_frame.encode(), dirs.encode(),
-                 pin.__version__.encode(), metadata.version("mujoco").encode(),
-                 Path(__file__).read_bytes()):
+    for part in (path.read_bytes(), camera_frame.encode(), dirs.encode(), *_code_identity()):
         h.update(hashlib.sha256(part).digest())
     return h.hexdigest()
 
