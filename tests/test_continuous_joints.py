@@ -47,7 +47,7 @@ def gen3like(tmp_path_factory) -> Path:
 def test_a_continuous_joint_is_pinocchios_cos_sin_joint_at_its_angle():
     """On the Kinova (joints 1, 4 and 6 continuous): frames, CRBA and the Coriolis matrix of
     the converted model at angles θ (far past ±π too) equal those of Pinocchio's own
-    (cos θ, sin θ) joints, to the bit."""
+    (cos θ, sin θ) joints, to round-off (a ulp)."""
     full = pin.buildModelFromUrdf(str(KINOVA), pin.JointModelFreeFlyer())
     model, names = as_revolute(full)
     assert names == ["j2s6s200_joint_1", "j2s6s200_joint_4", "j2s6s200_joint_6"]
@@ -73,6 +73,48 @@ def test_a_continuous_joint_is_pinocchios_cos_sin_joint_at_its_angle():
         np.testing.assert_allclose(pin.computeCoriolisMatrix(model, d_model, theta, v),
                                    pin.computeCoriolisMatrix(full, d_full, cs, v),
                                    rtol=0, atol=1e-12)
+
+
+def test_a_continuous_joint_about_any_axis_is_converted_and_loads(tmp_path):
+    """A URDF continuous joint about −z or about (0, 0.6, 0.8) is Pinocchio's unbounded
+    revolute of an unaligned axis: converted too (its axis from the joint's motion subspace),
+    the same placements and CRBA as the (cos, sin) joints at any angle, and the file loads
+    (the MuJoCo cross-parse included)."""
+    text = (SHIPPED_SPECS / "robots" / "servicer_panda.urdf").read_text()
+    for name, axis in (("panda_joint1", "0 0 -1"), ("panda_joint3", "0 0.6 0.8")):
+        start = text.index(f'<joint name="{name}" type="revolute">')
+        end = text.index("</joint>", start)
+        joint = text[start:end].replace('type="revolute"', 'type="continuous"')
+        joint = re.sub(r'<axis xyz="[^"]*" */>', f'<axis xyz="{axis}" />', joint)
+        text = text[:start] + joint + text[end:]
+    path = tmp_path / "unaligned.urdf"
+    path.write_text(text)
+    full = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    assert full.joints[2].shortname() == "JointModelRevoluteUnboundedUnaligned"
+    model, names = as_revolute(full)
+    assert names == ["panda_joint1", "panda_joint3"] and model.nq == full.nq - 2
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        theta = pin.neutral(model)
+        theta[7:] = rng.uniform(-7.0, 7.0, model.nq - 7)
+        cs = pin.neutral(full)
+        for j in range(2, full.njoints):
+            a, b = full.joints[j], model.joints[j]
+            cs[a.idx_q:a.idx_q + a.nq] = ((math.cos(theta[b.idx_q]), math.sin(theta[b.idx_q]))
+                                          if a.nq == 2 else theta[b.idx_q])
+        d_full, d_model = full.createData(), model.createData()
+        pin.framesForwardKinematics(full, d_full, cs)
+        pin.framesForwardKinematics(model, d_model, theta)
+        for f in range(len(full.frames)):
+            np.testing.assert_allclose(d_model.oMf[f].homogeneous, d_full.oMf[f].homogeneous,
+                                       rtol=0, atol=1e-13)
+        np.testing.assert_allclose(pin.crba(model, d_model, theta),
+                                   pin.crba(full, d_full, cs), rtol=0, atol=1e-13)
+    from pipeline.sim.robot_file import load_robot_model
+
+    loaded = load_robot_model(path, "camera", locked_joints={"panda_finger_joint1": 0.0,
+                                                             "panda_finger_joint2": 0.0})
+    assert (loaded.nq, loaded.nv) == (14, 13)
 
 
 def test_a_seven_joint_arm_with_four_continuous_joints_validates_runs_and_is_analysed(

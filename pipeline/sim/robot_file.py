@@ -152,6 +152,12 @@ _REVOLUTE_OF = {"JointModelRUBX": pin.JointModelRX, "JointModelRUBY": pin.JointM
                 "JointModelRUBZ": pin.JointModelRZ}
 
 
+def _is_continuous(kind: str) -> bool:
+    """Whether a joint kind is Pinocchio's unbounded revolute (an axis x, y or z: RUBX/Y/Z;
+    any other axis, a URDF's ``0 0 -1`` included: RevoluteUnboundedUnaligned)."""
+    return kind.startswith("JointModelRUB") or kind == "JointModelRevoluteUnboundedUnaligned"
+
+
 def as_revolute(model: pin.Model) -> tuple[pin.Model, list[str]]:
     """``model`` with each continuous joint (Pinocchio's unbounded revolute, its angle held as
     (cos θ, sin θ)) replaced by the revolute joint of the same axis, placement and body with
@@ -159,11 +165,13 @@ def as_revolute(model: pin.Model) -> tuple[pin.Model, list[str]]:
 
     One coordinate per joint, the angle θ itself: Pinocchio's integrate adds v·dt to it, so a
     joint turning past ±π stays continuous in q (unwrapped), and the kinematics and dynamics
-    are those of the (cos, sin) joint at that angle, to the bit on the collection's Kinova
-    (tests/test_continuous_joints.py). The frames are copied in order (their inertias already
-    in the joints' bodies, not appended again)."""
+    are those of the (cos, sin) joint at that angle, to round-off (a ulp at most, on the
+    collection's Kinova and on unaligned axes: tests/test_continuous_joints.py). Each joint's
+    effort, velocity, friction and damping limits, margins, armature and rotor parameters are
+    copied; the frames in order (their inertias already in the joints' bodies, not appended
+    again)."""
     kinds = [model.joints[j].shortname() for j in range(model.njoints)]
-    if not any(k.startswith("JointModelRUB") for k in kinds):
+    if not any(_is_continuous(k) for k in kinds):
         return model, []
     new, names = pin.Model(), []
     new.name = model.name
@@ -172,17 +180,26 @@ def as_revolute(model: pin.Model) -> tuple[pin.Model, list[str]]:
         qs = slice(joint.idx_q, joint.idx_q + joint.nq)
         vs = slice(joint.idx_v, joint.idx_v + joint.nv)
         lower, upper = model.lowerPositionLimit[qs], model.upperPositionLimit[qs]
-        if kind.startswith("JointModelRUB"):
+        margin = model.positionLimitMargin[qs]
+        if _is_continuous(kind):
             names.append(model.names[j])
-            joint = (_REVOLUTE_OF[kind]() if kind in _REVOLUTE_OF
-                     else pin.JointModelRevoluteUnaligned(joint.axis))
-            lower, upper = np.array([-np.inf]), np.array([np.inf])
+            if kind in _REVOLUTE_OF:
+                joint = _REVOLUTE_OF[kind]()
+            else:  # its axis: the motion subspace's angular part (this binding has no .axis)
+                axis = np.asarray(joint.createData().S).ravel()[3:]
+                joint = pin.JointModelRevoluteUnaligned(axis)
+            lower, upper, margin = np.array([-np.inf]), np.array([np.inf]), margin[:1]
         jid = new.addJoint(model.parents[j], joint, model.jointPlacements[j], model.names[j],
-                           model.upperEffortLimit[vs], model.upperVelocityLimit[vs], lower,
-                           upper)
+                           model.lowerEffortLimit[vs], model.upperEffortLimit[vs],
+                           model.lowerVelocityLimit[vs], model.upperVelocityLimit[vs], lower,
+                           upper, margin, model.lowerDryFrictionLimit[vs],
+                           model.upperDryFrictionLimit[vs], model.damping[vs])
         new.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
         at = new.joints[jid]
-        new.armature[at.idx_v:at.idx_v + at.nv] = model.armature[vs]
+        to = slice(at.idx_v, at.idx_v + at.nv)
+        new.armature[to] = model.armature[vs]
+        new.rotorInertia[to] = model.rotorInertia[vs]
+        new.rotorGearRatio[to] = model.rotorGearRatio[vs]
     for frame in list(model.frames)[1:]:
         new.addFrame(pin.Frame(frame), False)
     return new, names
