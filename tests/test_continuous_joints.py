@@ -28,6 +28,31 @@ from pipeline.spec import load_spec, with_overrides
 CONTINUOUS = ("panda_joint1", "panda_joint3", "panda_joint5", "panda_joint7")
 
 
+def _cos_sin(full: pin.Model, model: pin.Model, theta: np.ndarray) -> np.ndarray:
+    """``full``'s configuration (its continuous joints as cos and sin) at ``model``'s angles
+    θ (the same joints, each continuous one made one angle by ``as_revolute``)."""
+    cs = np.concatenate([theta[:7], np.zeros(full.nq - 7)])
+    for j in range(2, full.njoints):
+        a, b = full.joints[j], model.joints[j]
+        angle = theta[b.idx_q]
+        cs[a.idx_q:a.idx_q + a.nq] = (math.cos(angle), math.sin(angle)) if a.nq == 2 else angle
+    return cs
+
+
+def _same_placements_and_inertia(full, model, theta, atol: float) -> tuple:
+    """Frames and CRBA of ``model`` at θ against ``full``'s at (cos θ, sin θ); the data."""
+    cs = _cos_sin(full, model, theta)
+    d_full, d_model = full.createData(), model.createData()
+    pin.framesForwardKinematics(full, d_full, cs)
+    pin.framesForwardKinematics(model, d_model, theta)
+    for f in range(len(full.frames)):
+        np.testing.assert_allclose(d_model.oMf[f].homogeneous, d_full.oMf[f].homogeneous,
+                                   rtol=0, atol=atol)
+    np.testing.assert_allclose(pin.crba(model, d_model, theta), pin.crba(full, d_full, cs),
+                               rtol=0, atol=atol)
+    return cs, d_full, d_model
+
+
 @pytest.fixture(scope="module")
 def gen3like(tmp_path_factory) -> Path:
     """The servicer's Panda with joints 1, 3, 5 and 7 declared continuous, and a spec."""
@@ -56,20 +81,8 @@ def test_a_continuous_joint_is_pinocchios_cos_sin_joint_at_its_angle():
     for _ in range(10):
         theta = pin.neutral(model)
         theta[7:] = rng.uniform(-9.0, 9.0, 6)
-        cs = pin.neutral(full)
-        for j in range(2, full.njoints):
-            a, b = full.joints[j], model.joints[j]
-            cs[a.idx_q:a.idx_q + a.nq] = ((math.cos(theta[b.idx_q]), math.sin(theta[b.idx_q]))
-                                          if a.nq == 2 else theta[b.idx_q])
         v = rng.normal(size=12)
-        d_full, d_model = full.createData(), model.createData()
-        pin.framesForwardKinematics(full, d_full, cs)
-        pin.framesForwardKinematics(model, d_model, theta)
-        for f in range(len(full.frames)):
-            np.testing.assert_allclose(d_model.oMf[f].homogeneous, d_full.oMf[f].homogeneous,
-                                       rtol=0, atol=1e-15)
-        np.testing.assert_allclose(pin.crba(model, d_model, theta),
-                                   pin.crba(full, d_full, cs), rtol=0, atol=1e-15)
+        cs, d_full, d_model = _same_placements_and_inertia(full, model, theta, 1e-15)
         np.testing.assert_allclose(pin.computeCoriolisMatrix(model, d_model, theta, v),
                                    pin.computeCoriolisMatrix(full, d_full, cs, v),
                                    rtol=0, atol=1e-12)
@@ -97,19 +110,7 @@ def test_a_continuous_joint_about_any_axis_is_converted_and_loads(tmp_path):
     for _ in range(10):
         theta = pin.neutral(model)
         theta[7:] = rng.uniform(-7.0, 7.0, model.nq - 7)
-        cs = pin.neutral(full)
-        for j in range(2, full.njoints):
-            a, b = full.joints[j], model.joints[j]
-            cs[a.idx_q:a.idx_q + a.nq] = ((math.cos(theta[b.idx_q]), math.sin(theta[b.idx_q]))
-                                          if a.nq == 2 else theta[b.idx_q])
-        d_full, d_model = full.createData(), model.createData()
-        pin.framesForwardKinematics(full, d_full, cs)
-        pin.framesForwardKinematics(model, d_model, theta)
-        for f in range(len(full.frames)):
-            np.testing.assert_allclose(d_model.oMf[f].homogeneous, d_full.oMf[f].homogeneous,
-                                       rtol=0, atol=1e-13)
-        np.testing.assert_allclose(pin.crba(model, d_model, theta),
-                                   pin.crba(full, d_full, cs), rtol=0, atol=1e-13)
+        _same_placements_and_inertia(full, model, theta, 1e-13)
     from pipeline.sim.robot_file import load_robot_model
 
     loaded = load_robot_model(path, "camera", locked_joints={"panda_finger_joint1": 0.0,
@@ -156,13 +157,8 @@ def test_a_continuous_joint_turns_past_pi_with_q_continuous(gen3like):
     full = pin.buildReducedModel(full, [full.getJointId("panda_finger_joint1"),
                                         full.getJointId("panda_finger_joint2")],
                                  pin.neutral(full))
-    cs = np.concatenate([q[k, :7], np.zeros(full.nq - 7)])
     model = mission.robot.model
-    for j in range(2, full.njoints):
-        a, b = full.joints[j], model.joints[j]
-        angle = q[k, b.idx_q]
-        cs[a.idx_q:a.idx_q + a.nq] = ((math.cos(angle), math.sin(angle)) if a.nq == 2
-                                      else angle)
+    cs = _cos_sin(full, model, q[k])
     fid = mission.robot.frame_id
     d_full, d_model = full.createData(), model.createData()
     pin.computeJointJacobians(full, d_full, cs)
