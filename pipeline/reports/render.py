@@ -200,7 +200,8 @@ def figure_jobs(out: Path, runs: list[fg.RunData], imported: list[fg.RunData] = 
                 f"figures/sweep_{name}.png", f"Bus-inertia sweep, {name}",
                 "Lag-1 of ω_b's dominant step component and ω_b's period-2 amplitude against "
                 "the bus rigid body's I_zz,bus; the dashed line is the predicted crossing "
-                "I_zz,bus = dt·D_b/2, where dt·μ_bus = 2."), partial(fg.inertia_map, table)))
+                "I_zz,bus = dt·D_b/2, where dt·μ_bus = 2 (the closed form's: drawn only where "
+                "the bus CoM is on the first joint's axis)."), partial(fg.inertia_map, table)))
             continue
         jobs.append((fg.Figure(
             f"figures/sweep_{name}.png", f"dt-sweep stability map, {name}",
