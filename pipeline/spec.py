@@ -503,7 +503,11 @@ def spec_chain(path: Path) -> list[tuple[Path, dict]]:
 def raw_spec(path: Path) -> dict:
     """The merged raw mapping of a spec and its ``extends`` chain: each file a JSON Merge
     Patch (RFC 7386) of its parent's (:mod:`pipeline.merge_patch`)."""
-    chain = spec_chain(path)
+    return _merged(spec_chain(path))
+
+
+def _merged(chain: list[tuple[Path, dict]]) -> dict:
+    """The chain's mappings applied root first, each a merge patch of the one before."""
     merged = chain[-1][1]
     for _, data in reversed(chain[:-1]):
         merged = merge_patch(merged, data)
@@ -515,7 +519,7 @@ def key_sources(path: Path) -> tuple[dict[str, str], dict[str, str]]:
     every leaf of a spec's merged mapping (``validate --explain``)."""
     chain = spec_chain(path)
     own = [(p.stem, leaf_keys(data)) for p, data in chain]
-    merged = leaf_keys(raw_spec(path))
+    merged = leaf_keys(_merged(chain))
     sources = {}
     for key in merged:
         # A mapping whose every key a patch deleted is an empty leaf no file writes: the
