@@ -20,13 +20,16 @@ redundancy  eq. 37's null-space basis, H, Γ, Γ⁻¹ and Γ̇ of a redundant ar
 rates       Γ̇ (eq. 7), M̂ and Ĉ (eqs. 8, 9) and σ_min, κ (eq. 19)          rotations
 errors      the task errors of eq. 14 and the CoM loop of eq. 12           rotations
 guidance    the references of eq. 17 and the coverage test of eq. 18       linalg
+terms       the rigid-body terms (CRBA, Coriolis, Jacobians, centroidal    linalg
+            map) and q ⊕ δ (eqs. 1–11, 22)
 transform   ``task_transform`` and ``full_transform`` (eqs. 2–9, 19, 37)  kinematics, rates,
-                                                                           redundancy
+                                                                           redundancy, terms
 loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs, updates, errors
 row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
-step        ``controller_step`` (eq. 22), as a mission's first step calls  all of the above
+step        ``controller_step`` and the compiled mission loop (eq. 22), as  all of the above
+            a mission's first step calls them
 analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics,
-                                                                           redundancy
+                                                                           redundancy, terms
 plant       the sampled-data plant: RK4 on the articulated-body algorithm  linalg
             (eq. 29)
 ==========  =============================================================  =================
@@ -112,13 +115,6 @@ def _c(*shape: int):
     return np.zeros(shape)
 
 
-def _fortran(*shape: int):
-    """A Fortran-ordered float64 array: Pinocchio's centroidal map and its rate."""
-    import numpy as np
-
-    return np.zeros(shape, order="F")
-
-
 def _reference():
     from pipeline.sim.base_guidance import REFERENCE_FIELDS, Reference
 
@@ -146,14 +142,15 @@ def _transform_bundle():
     return Transform(p_bc=_c(3), p_c=_c(3), J_bar_v=_c(3, 6), J_oplus=_c(6, 6), G_wb=_c(6, 3),
                      J_oplus_inv=_c(6, 6), s_min_J=1.0, kappa_J=1.0, gamma=_c(12, 12),
                      gamma_inv=_c(12, 12), gamma_dot=_c(12, 12), M_hat=_c(12, 12),
-                     C_hat=_c(12, 12), s_min_G=1.0, kappa_G=1.0)
+                     C_hat=_c(12, 12), s_min_G=1.0, kappa_G=1.0, gamma_vt=_c(12, 12))
 
 
 def _step_state():
     from pipeline.sim import control_step as cs
 
-    flags = ("has_prev", "measure")
-    return cs.StepState(**{f: (False if f in flags else 0.0 if size == 1 else _c(size))
+    flags = ("has_prev", "measure", "warm")
+    return cs.StepState(**{f: (False if f in flags else 0.0 if size == 1 else
+                               _c(12, 12) if f == "gamma_vt" else _c(size))
                            for f, size in _layout().state_fields if f != "dq"})
 
 
@@ -166,7 +163,8 @@ def _linalg() -> None:
                          (la.matmul, (_c(3, 3), _c(3, 3))), (la.solve, (_c(9, 9), _c(9))),
                          (la.inverse, (_c(9, 9),)), (la.cholesky_lower, (_c(9, 9),)),
                          (la.eigvalsh, (_c(9, 9),)), (la.svd, (_c(6, 6),)),
-                         (la.singular_values, (_c(12, 12),)), (la.determinant, (_c(6, 6),))):
+                         (la.singular_values, (_c(12, 12),)), (la.determinant, (_c(6, 6),)),
+                         (la.svd_right_from, (_c(12, 12), _c(12, 12)))):
         _compile(kernel, *args)
 
 
@@ -209,11 +207,10 @@ def _loop() -> None:
     from pipeline.sim import control_step as cs
     from pipeline.sim.task_transform import DynamicsInputs
 
-    # The step kernel's copies of the placements; Pinocchio's Jacobians and matrices as it
-    # hands them over (its centroidal map and rate Fortran-ordered).
+    # The rigid-body terms' arrays, all C-ordered.
     pose = DynamicsInputs(R_tb=_c(3, 3), p_b=_c(3), R_te=_c(3, 3), p_e=_c(3), J_e=_c(6, 12),
-                          dJ_e=_c(6, 12), M=_c(12, 12), C=_c(12, 12), Ag=_fortran(6, 12),
-                          dAg=_fortran(6, 12))
+                          dJ_e=_c(6, 12), M=_c(12, 12), C=_c(12, 12), Ag=_c(6, 12),
+                          dAg=_c(6, 12))
     p = cs.ControlParams(**{f: (False if f in ("derate_gain", "imex") else
                                 1.0 if size == 1 else _c(size))
                             for f, size in _layout().controller_fields})
@@ -232,12 +229,25 @@ def _kinematics() -> None:
 
 def _rates() -> None:
     from pipeline.sim import task_transform as tt
-    from pipeline.sim.sampling import sigma_min_and_cond
+    from pipeline.sim.sampling import conditioning_from, sigma_min_and_cond
 
     _compile(tt.gamma_time_derivative, _c(3, 3), _c(3, 3), _c(3, 3), _c(3), _c(3), _c(3, 6),
-             _c(6, 12), _c(12), _c(6, 12), _fortran(6, 12), _fortran(6, 12), 1.0)
+             _c(6, 12), _c(12), _c(6, 12), _c(6, 12), _c(6, 12), 1.0)
     _compile(tt.transformed_dynamics, *(_c(12, 12) for _ in range(4)))
     _compile(sigma_min_and_cond, _c(12, 12))
+    _compile(conditioning_from, _c(12, 12), _c(12, 12))
+
+
+def _terms() -> None:
+    """The rigid-body terms (eqs. 1–11) and q ⊕ δ (eq. 22), as the mission loop, the
+    robot's terms and the analysis' rebuild call them."""
+    from pipeline.sim.configuration import integrate_configuration
+    from pipeline.sim.rigid_body_terms import dynamics_terms, placement_terms
+
+    s = seed()
+    dynamics_terms(s.robot.bundle, s.q.copy(), s.v.copy())
+    placement_terms(s.robot.bundle, s.q.copy())
+    integrate_configuration(s.q.copy(), s.v.copy())
 
 
 def _transform() -> None:
@@ -255,7 +265,7 @@ def _guidance() -> None:
 
     s = seed()
     g = BaseGuidance(s.spec.guidance, np.array([0.1, 0.0, 0.5]), np.array([1.0, 0.0, 0.0]))
-    p_b = s.robot.dynamics_inputs(s.q, s.v).p_b  # Pinocchio's view, as the mission passes it
+    p_b = np.zeros(3)  # the rigid-body terms' own array, as the mission passes it
     g.reference(0.0)
     g.reference(0.0, p_b.copy())
     g.reference_into(np.zeros(REFERENCE_SIZE), 0.0, p_b)
@@ -361,14 +371,16 @@ UNITS = {u.name: u for u in (
     Unit("rates", "Γ̇, M̂, Ĉ and Γ's conditioning (eqs. 7-9, 19)", ("rotations",), _rates),
     Unit("errors", "the task errors and CoM loop (eqs. 12, 14)", ("rotations",), _errors),
     Unit("guidance", "the references and coverage (eqs. 17, 18)", ("linalg",), _guidance),
+    Unit("terms", "the rigid-body terms and q ⊕ δ (eqs. 1-11, 22)", ("linalg",), _terms),
     Unit("transform", "the task transform (eqs. 2-9, 19, 37)",
-         ("kinematics", "rates", "redundancy"), _transform),
+         ("kinematics", "rates", "redundancy", "terms"), _transform),
     Unit("loop", "the loops of one step (eqs. 12-16, 21)", ("rhs", "updates", "errors"),
          _loop),
     Unit("row", "the step's readers, writers and γ ramp (eq. 20)", ("linalg",), _row),
-    Unit("step", "the step kernel (eq. 22)", ("transform", "loop", "guidance", "row"), _step),
-    Unit("analysis", "the analysis' rebuild of Γ and its SVDs", ("kinematics", "redundancy"),
-         _analysis),
+    Unit("step", "the step kernel and the mission loop (eq. 22)",
+         ("transform", "loop", "guidance", "row"), _step),
+    Unit("analysis", "the analysis' rebuild of Γ and its SVDs",
+         ("kinematics", "redundancy", "terms"), _analysis),
     Unit("plant", "the sampled-data plant's RK4 and dynamics (eq. 29)", ("linalg",), _plant),
 )}
 

@@ -253,29 +253,6 @@ def test_kernel_cache_is_keyed_on_every_sim_source(tmp_path):
     assert jit_mod.source_stamp() in config.CACHE_DIR
 
 
-def test_cached_pinocchio_views_follow_every_call(mission):
-    """The step reads placements and the centroidal map through views taken once; after
-    Pinocchio runs at new states they must equal what Pinocchio's accessors return."""
-    import pinocchio as pin
-
-    robot = mission.robot
-    assert robot._views is not None  # this Pinocchio hands out views
-    rng = np.random.default_rng(11)
-    for _ in range(3):
-        q = pin.randomConfiguration(robot.model, -np.ones(robot.model.nq),
-                                    np.ones(robot.model.nq))
-        got = [np.array(a) for a in robot.dynamics_inputs(q, rng.standard_normal(robot.model.nv))]
-        fresh = robot.model.createData()  # independent of the robot's data and its views
-        pin.forwardKinematics(robot.model, fresh, q)
-        pin.updateFramePlacement(robot.model, fresh, robot.frame_id)
-        oMb, oMe = fresh.oMi[1], fresh.oMf[robot.frame_id]
-        for a, b in zip(got[:4], (oMb.rotation, oMb.translation, oMe.rotation, oMe.translation),
-                        strict=True):
-            np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
-        np.testing.assert_allclose(got[8], pin.computeCentroidalMap(robot.model, fresh, q),
-                                   rtol=0, atol=1e-12)
-
-
 def test_every_module_whose_names_the_kernels_freeze_is_in_their_cache_key():
     """A compiled kernel freezes the globals it reads (the shapes' blocks, TASK_DOF, the
     layouts' places): a module outside pipeline/sim that supplies one must be hashed into the

@@ -22,7 +22,6 @@ from pipeline.log_layout import LIMIT_FLAGS
 from pipeline.logs import num_rows, read_columns, read_meta
 from pipeline.paths import PROJECT_ROOT
 from pipeline.sim import breve_controller as bc
-from pipeline.sim.base_guidance import BaseGuidance
 from pipeline.sim.limits import saturate
 from pipeline.sim.mission import Mission
 from pipeline.sim.robot import GiordanoRobot
@@ -434,18 +433,21 @@ def test_a_log_streamed_in_chunks_is_the_log_written_whole(tmp_path):
 # -- non-finite state --------------------------------------------------------------------------
 
 def test_nan_state_stops_the_run_and_is_logged_failed(tmp_path, monkeypatch):
-    """A NaN reference at step n_ok makes that step's new state non-finite."""
+    """A NaN reference from step n_ok on makes that step's new state non-finite: the compiled
+    loop flies slices of n_ok steps here, and the guidance's constants turn NaN after the
+    first slice."""
+    import pipeline.sim.mission as mission_module
+
     n_ok = 5
-    original = BaseGuidance.reference_into
-    calls = {"n": 0}
+    monkeypatch.setattr(mission_module, "SLICE_STEPS", n_ok)
+    original = Mission._fly
 
-    def poisoned(self, out, tau, p_b):
-        original(self, out, tau, p_b)
-        calls["n"] += 1
-        if calls["n"] > n_ok:
-            out[:] = np.nan
+    def poisoned(self, *args):
+        out = original(self, *args)
+        self.guidance.params[:] = np.nan
+        return out
 
-    monkeypatch.setattr(BaseGuidance, "reference_into", poisoned)
+    monkeypatch.setattr(Mission, "_fly", poisoned)
     spec = _three_seconds("short_nominal")
     with pytest.raises(RunFailed, match="failed"):
         run_spec(spec, tmp_path)

@@ -31,6 +31,10 @@ from pipeline.spec import Spec
 class StaticGuidance:
     """A reference that holds the pose of a given state: desired = actual, all rates zero."""
 
+    # No guidance constants: the compiled mission loop then flies the reference vector as
+    # ``reference_into`` left it (``ReducedLoop.guidance`` empty).
+    params = np.empty(0)
+
     def __init__(self, ref: Reference):
         self.ref = ref
         self._vector = ref.as_vector()

@@ -341,9 +341,10 @@ def rebuild_and_project(robot: GiordanoRobot, log: VerifiedLog, win: Window
                         ) -> tuple[rs.Provenance, np.ndarray, np.ndarray, np.ndarray]:
     """Stages 1–2, streamed by row group: provenance over every step, and the projections
     y (eq. 26), the singular values of Γ and the reduced velocity ν̆ = (Γ v)[3:] over the
-    window. Every step's SVD starts from the step before's vectors (about half the sweeps of a
-    start from the identity), so the rebuilt σ_min differs from the simulator's (started from
-    the identity each step) by rounding alone: a few ε ‖Γ‖ absolutely, about 1e-16 here."""
+    window. Every step's SVD starts from the step before's vectors, the first from the identity
+    (about a third of the sweeps of a start from the identity): the simulator's own chain of
+    SVDs, so on a whole simulated log (or an import's rebuilt σ) the rebuilt σ_min and κ are
+    the logged ones to the bit."""
     worst, worst_step, worst_kappa = 0.0, -1, 0.0
     ys, sigmas, nus, V_prev, Vt_last = [], [], [], None, None
     for chunk in _batches(log.iter_columns(["step", "q", "v", "s_min_G", "kappa_G"])):

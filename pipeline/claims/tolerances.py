@@ -56,6 +56,7 @@ from pipeline.errors import SpecError
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, library_versions, sim_version
 from pipeline.sim.mission import LoopState, Mission
+from pipeline.sim.mission_loop import FLOWN
 from pipeline.spec import Spec, load_spec
 
 SCHEMA = "breve-tolerances/1"
@@ -77,7 +78,8 @@ class NudgedMission(Mission):
     """A mission whose initial state has some entries of q0 and v0 moved by one ulp, and, with
     a ``seed``, its q and v moved by one ulp (up, down or not, at random) after every step:
     the hooks of the measurement, by overriding :meth:`Mission.initial_state` and
-    ``Mission._advance`` (the simulator itself is untouched)."""
+    ``Mission._fly`` (one step per call of the compiled loop here; the simulator itself is
+    untouched)."""
 
     def __init__(self, spec: Spec, nudges: list[tuple[str, int, float]],
                  seed: int | None = None):
@@ -93,15 +95,19 @@ class NudgedMission(Mission):
             x[i] = np.nextafter(x[i], towards)
         return s
 
-    def _advance(self, k, state, rows, ctrl, coverage) -> bool:
-        finite = super()._advance(k, state, rows, ctrl, coverage)
-        if self.rng is not None:
+    def _fly(self, start, stop, state, rows, ctrl, coverage, clip):
+        if self.rng is None:
+            return super()._fly(start, stop, state, rows, ctrl, coverage, clip)
+        for i in range(start, stop):
+            status, last, why = super()._fly(i, i + 1, state, rows, ctrl, coverage, clip)
+            if status != FLOWN:
+                return status, last, why
             for sl in (self.layout.state["q"], self.layout.state["v"]):
                 way = self.rng.integers(-1, 2, sl.stop - sl.start)  # −1, 0 or +1 ulp
                 x = state[sl]
                 state[sl] = np.where(way == 0, x, np.nextafter(x, way * np.inf))
             self.steps_nudged += 1
-        return finite
+        return FLOWN, stop, ""
 
 
 def ulp_members(spec: Spec) -> dict[str, list[tuple[str, int, float]]]:
@@ -126,7 +132,7 @@ def run_columns(spec: Spec, nudges: list[tuple[str, int, float]] | None = None,
     result = mission.run()
     if seed is not None and mission.steps_nudged != result.rows:
         raise RuntimeError(f"the per-step hook ran {mission.steps_nudged} times in "
-                           f"{result.rows} steps: Mission._advance is no longer the step")
+                           f"{result.rows} steps: Mission._fly no longer flies the steps")
     return result.columns
 
 

@@ -47,6 +47,7 @@ from pipeline.provenance.keys import (
     library_versions,
 )
 from pipeline.shapes import RobotShape
+from pipeline.sim.linalg import svd_right_sequence
 from pipeline.sim.robot import GiordanoRobot
 from pipeline.sim.robot_file import robot_shape
 from pipeline.spec import RobotSpec, Spec, spec_hash_of
@@ -141,7 +142,7 @@ def write_import(prep: PreparedImport, path: Path) -> ImportOutcome:
     n = len(q)
     spec, content = import_spec(prep.name, prep.robot, time.dt, n, prep.robot_here,
                                 str(prep.source))
-    sigma = np.array([_sigmas(prep.model_robot, qk) for qk in q])
+    sigma = _sigmas(prep.model_robot, q)
     if prep.raw.s_min_G is not None:  # the source's own: the provenance check is a check
         sigma[:, 0] = prep.raw.s_min_G
     record = {"source": display_path(prep.source.resolve()),
@@ -271,10 +272,23 @@ def read_source(source: Path, mapping: ImportMapping, fmt: str, shape: RobotShap
     return raw, before
 
 
-def _sigmas(robot: GiordanoRobot, q: np.ndarray) -> tuple[float, float, float, float]:
-    """(σ_min, κ) of Γ and of the damped J⊕ at q, by the simulator's kernels (eq. 19)."""
-    T = robot.terms(q, np.zeros(robot.model.nv), dynamics=False)
-    return T.s_min_G, T.kappa_G, T.s_min_J, T.kappa_J
+def _sigmas(robot: GiordanoRobot, q: np.ndarray, rows: int = 4096) -> np.ndarray:
+    """(σ_min, κ) of Γ and of the damped J⊕ at every row of q (N×4, ``SIGMA_COLUMNS``), by the
+    simulator's kernels (eq. 19): Γ's SVDs as a run makes them, each from the step before's
+    right vectors, the first from the identity (the analysis' chain, so its provenance check
+    of a rebuilt σ is exact); ``rows`` at a time."""
+    out = np.empty((len(q), 4))
+    Vt_last = np.empty((0, 0))
+    for a in range(0, len(q), rows):
+        S, Vt = svd_right_sequence(robot.gamma_matrices(q[a:a + rows]), Vt_last)
+        Vt_last = np.ascontiguousarray(Vt[-1])
+        out[a:a + rows, 0] = S[:, -1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[a:a + rows, 1] = np.where(S[:, -1] > 0, S[:, 0] / S[:, -1], np.inf)
+    for k, qk in enumerate(q):
+        T = robot.terms(qk, np.zeros(robot.model.nv), dynamics=False)
+        out[k, 2:] = T.s_min_J, T.kappa_J
+    return out
 
 
 def _bag_digest(path: Path) -> str:

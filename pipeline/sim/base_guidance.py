@@ -140,7 +140,7 @@ class BaseGuidance:
         self.omega = 2 * np.pi / cfg.orbit_period
         self.phase = float(np.deg2rad(cfg.orbit_phase_deg))
         self._zero3 = np.zeros(3)
-        self._params = pack(GUIDANCE_FIELDS, {
+        self.params = pack(GUIDANCE_FIELDS, {
             "phase": self.phase, "radius": cfg.orbit_radius, "omega": self.omega,
             "aim_amplitude": cfg.aim_amplitude, "aim_period": cfg.aim_period, "h": _H,
             "o_ce_b": self.o_ce_b, "x_e_b": self.x_e_b})
@@ -151,9 +151,9 @@ class BaseGuidance:
         without it, from the desired CoM. Rates are those of the orbit-based references.
         """
         return references(tau, self._zero3 if p_b is None else p_b, p_b is not None,
-                          self._params)
+                          self.params)
 
     def reference_into(self, out: np.ndarray, tau: float, p_b: np.ndarray) -> None:
         """:meth:`reference` at (τ, p_b) as one vector (``REFERENCE_FIELDS``), into ``out``:
         the simulator's per-step form, one compiled call and no objects."""
-        reference_vector(out, tau, p_b, True, self._params)
+        reference_vector(out, tau, p_b, True, self.params)

@@ -1,10 +1,11 @@
 """One controller step in one compiled call (eq. 22's update order), and the flat layouts it
 reads and writes.
 
-The mission calls Pinocchio, then :func:`controller_step` with Pinocchio's outputs, the
-references, the controller's parameters, the carried state and the log. A step computes some
-forty small arrays; handed between Python and compiled code one by one, their boxing would
-cost several times the Pinocchio calls themselves (architecture §7). So the state, the parameters
+The mission loop (:mod:`pipeline.sim.mission_loop`, or the sampled-data plant's Python step)
+computes the rigid-body terms, then calls :func:`controller_step` with them, the references,
+the controller's parameters, the carried state and the log. A step computes some forty small
+arrays; handed between Python and compiled code one by one, their boxing would cost several
+times the terms themselves (architecture §7). So the state, the parameters
 and the log row are flat float vectors whose layouts are named here, next to the code that
 reads them (:mod:`pipeline.sim.layout`), sized by the robot's shape (:func:`step_layout`).
 Inside, the kernels read and write them by name, through namedtuples built from the vectors
@@ -33,16 +34,18 @@ from pipeline.sim.plant import commanded_force
 from pipeline.sim.rotations import attitude_error
 from pipeline.sim.sampling import scale_by_svd
 from pipeline.sim.target import mark_visible
-from pipeline.sim.task_transform import DynamicsInputs, full_transform
+from pipeline.sim.task_transform import full_transform
 
 
 def state_fields(shape: RobotShape) -> Layout:
     """The carried state: what step k hands to step k + 1, and the increment v_{k+1} dt that
-    Pinocchio's integrate turns into q_{k+1} (eq. 22). ``measure`` set: v_c and v̆ are not
-    carried but measured at the step's start, ν = Γ(q) v (the sampled-data plant, eq. 29)."""
+    q ⊕ δ turns into q_{k+1} (eq. 22). ``measure`` set: v_c and v̆ are not
+    carried but measured at the step's start, ν = Γ(q) v (the sampled-data plant, eq. 29).
+    ``gamma_vt``: the right singular vectors of the step's Γ, row-major, where the next step's
+    SVD starts (eq. 19) when ``warm`` is set."""
     return (("q", shape.nq), ("v", shape.nv), ("v_c", 3), ("v_breve", shape.n_breve),
             ("tau", 1), ("integral", 3), ("v_breve_des_prev", shape.n_breve), ("has_prev", 1),
-            ("measure", 1), ("dq", shape.nv))
+            ("measure", 1), ("gamma_vt", shape.nv * shape.nv), ("warm", 1), ("dq", shape.nv))
 
 
 def controller_fields(shape: RobotShape) -> Layout:
@@ -154,12 +157,14 @@ def read_params(c, at):
 @jit
 def read_state(s, at):
     """The carried state (``state_fields``, places ``at``, but ``dq``) by name, as contiguous
-    copies."""
+    copies; ``gamma_vt`` as its square matrix."""
+    nv = s[at.v].size
     return StepState(
         q=s[at.q].copy(), v=s[at.v].copy(), v_c=s[at.v_c].copy(),
         v_breve=s[at.v_breve].copy(), tau=s[at.tau], integral=s[at.integral].copy(),
         v_breve_des_prev=s[at.v_breve_des_prev].copy(), has_prev=s[at.has_prev] > 0.5,
-        measure=s[at.measure] > 0.5)
+        measure=s[at.measure] > 0.5, gamma_vt=s[at.gamma_vt].copy().reshape((nv, nv)),
+        warm=s[at.warm] > 0.5)
 
 
 @jit
@@ -318,19 +323,18 @@ def controller_step(inputs, ref, ctrl, state, rows, k, coverage, shape_index):
     Eqs. 2–9 and 19 (37 for a redundant arm, :func:`full_transform`), γ (eq. 20), both loops
     (:func:`loop_update`), the pointing errors and coverage (eq. 18); writes log row k
     (``row_fields``) and advances ``state`` in place to step k + 1, all but q: its increment
-    v_{k+1} dt is left in the ``dq`` field for Pinocchio's integrate. Returns whether the new
+    v_{k+1} dt is left in the ``dq`` field for q ⊕ δ. Returns whether the new
     state is finite.
     """
     at = STEP_PLACES[shape_index]
     p = read_params(ctrl, at.controller)
     r = read_reference(ref)
     s = read_state(state, at.state)
-    # Copies: C-ordered, as the kernels downstream are written for.
-    pose = DynamicsInputs(R_tb=np.ascontiguousarray(inputs.R_tb).copy(), p_b=inputs.p_b.copy(),
-                          R_te=np.ascontiguousarray(inputs.R_te).copy(), p_e=inputs.p_e.copy(),
-                          J_e=inputs.J_e, dJ_e=inputs.dJ_e, M=inputs.M, C=inputs.C,
-                          Ag=inputs.Ag, dAg=inputs.dAg)
-    tr = full_transform(pose, p.mass, p.inverse_floor, p.inverse_damping, s.v)
+    pose = inputs  # the rigid-body terms' own C-ordered arrays, fresh at every step
+    # Γ's SVD from the step before's right vectors (eq. 19): two or three Jacobi sweeps
+    # instead of seven or eight; the first step starts from the identity.
+    start = s.gamma_vt if s.warm else np.empty((0, 0))
+    tr = full_transform(pose, p.mass, p.inverse_floor, p.inverse_damping, s.v, start)
     st = at.state
     if s.measure:  # the sampled-data plant's state: the controller measures ν = Γ(q) v
         nu_measured = matvec(tr.gamma, s.v)
@@ -364,5 +368,7 @@ def controller_step(inputs, ref, ctrl, state, rows, k, coverage, shape_index):
     state[st.integral] = out.integral
     state[st.v_breve_des_prev] = out.v_breve_des
     state[st.has_prev] = 1.0
+    state[st.gamma_vt] = tr.gamma_vt.ravel()
+    state[st.warm] = 1.0
     state[st.dq] = out.v * p.dt
     return state_is_finite(s.q, out.v, out.v_breve, out.v_c)

@@ -111,7 +111,7 @@ def quat_rotation(x: float, y: float, z: float, w: float) -> np.ndarray:
 
 
 @jit
-def _axis_rotation(k: np.ndarray, angle: float) -> np.ndarray:
+def axis_rotation(k: np.ndarray, angle: float) -> np.ndarray:
     """Rodrigues: the rotation of ``angle`` about the unit axis k."""
     s, c = math.sin(angle), math.cos(angle)
     R = np.empty((3, 3))
@@ -232,7 +232,7 @@ def forward_dynamics(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndar
             for a in range(6):
                 vJ[a] = v[iv + a]
         else:
-            RJ = _axis_rotation(tree.axis[j], q[iq])
+            RJ = axis_rotation(tree.axis[j], q[iq])
             p[j] = pp
             vJ[:3] = 0.0
             for a in range(3):

@@ -429,41 +429,51 @@ def _reorthonormalise_rows(P: np.ndarray) -> None:
 
 
 @jit
+def svd_right_from(A: np.ndarray, Vt_before: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """σ (descending) and Vᵀ of the square A, started from the right vectors ``Vt_before`` of
+    a matrix near it (the step before's), made orthonormal again by one Newton–Schulz step;
+    from the identity if ``Vt_before`` is empty or not finite (then σ is
+    :func:`singular_values`' to the bit). NaN everywhere if A is not finite.
+
+    One-sided Jacobi started from V rotates the columns of A V, which are orthogonal but for
+    A's change since, so it needs two or three sweeps where a start from the identity needs
+    seven or eight. The rows rotated are those of A V, a product, so each σ is right to about
+    n ε ‖A‖ absolutely (a small σ of a graded A to that, not to a small multiple of ε relative
+    to itself as from the identity)."""
+    n = A.shape[0]
+    s = np.empty(n)
+    Vt = np.empty((n, n))
+    if not _all_finite(A):
+        s[:] = np.nan
+        Vt[:] = np.nan
+        return s, Vt
+    if Vt_before.shape[0] == n and _all_finite(Vt_before):
+        start = Vt_before.copy()
+        _reorthonormalise_rows(start)
+    else:
+        start = np.eye(n)
+    B = matmul(start, np.ascontiguousarray(A.T))  # rows (A v_i)ᵀ: A V_start's columns
+    _orthogonalise_rows(B, start)
+    norms = _row_norms(B)
+    order = _descending(norms)
+    for c in range(n):
+        s[c] = norms[order[c]]
+        Vt[c] = start[order[c]]
+    return s, Vt
+
+
+@jit
 def svd_right_sequence(A: np.ndarray, Vt0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """σ and Vᵀ of each square A[k] of a slowly varying sequence (N×n×n → N×n, N×n×n), as
-    :func:`svd_right`, each started from the right vectors of the one before: the first from
-    ``Vt0`` (the identity if ``Vt0`` is empty or not finite), a member after a non-finite one
-    from the identity.
-
-    One-sided Jacobi started from V_{k−1} rotates the columns of A_k V_{k−1}, which are
-    orthogonal but for A's change over a step, so it needs two or three sweeps where a start
-    from the identity needs seven or eight (the analysis' Γ over consecutive steps, eq. 26).
-    The start is made orthonormal again by one Newton–Schulz step first, so the rounding of
-    one member's rotations is not carried into the next. The rows rotated are those of A_k
-    V_start, a product, so each σ is right to about n ε ‖A_k‖ absolutely (a small σ of a
-    graded A to that, not to a small multiple of ε relative to itself as from the identity):
-    about 1e-16 for the analysis' Γ, whose ‖Γ‖ is near 1."""
+    :func:`svd_right`, each started from the right vectors of the one before
+    (:func:`svd_right_from`): the first from ``Vt0`` (the identity if ``Vt0`` is empty or not
+    finite), a member after a non-finite one from the identity. About 1e-16 absolutely for the
+    analysis' Γ, whose ‖Γ‖ is near 1 (eq. 26)."""
     N, n = A.shape[0], A.shape[1]
     S = np.empty((N, n))
     Vt = np.empty((N, n, n))
-    start = np.eye(n)
-    if Vt0.shape[0] == n and _all_finite(Vt0):
-        start = Vt0.copy()
-        _reorthonormalise_rows(start)
+    before = Vt0
     for k in range(N):
-        if not _all_finite(A[k]):
-            S[k] = np.nan
-            Vt[k] = np.nan
-            start = np.eye(n)
-            continue
-        B = matmul(start, np.ascontiguousarray(A[k].T))  # rows (A_k v_i)ᵀ: A_k V_start's columns
-        W = start.copy()
-        _orthogonalise_rows(B, W)
-        norms = _row_norms(B)
-        order = _descending(norms)
-        for c in range(n):
-            S[k, c] = norms[order[c]]
-            Vt[k, c] = W[order[c]]
-        start = Vt[k].copy()
-        _reorthonormalise_rows(start)
+        S[k], Vt[k] = svd_right_from(np.ascontiguousarray(A[k]), before)
+        before = Vt[k]
     return S, Vt

@@ -8,10 +8,12 @@ Order of one step k (the discrete map of eq. 22 follows exactly this order):
 4. τ_{k+1} = τ_k + γ_k dt.
 Row k of the log holds the state at the start of step k and what step k computed from it.
 
-Python calls Pinocchio (``GiordanoRobot.dynamics_inputs``) and the guidance, then the compiled
-``controller_step`` does the rest of the step in one call (:mod:`pipeline.sim.control_step`),
-and Pinocchio's integrate closes it. :meth:`Mission.step` runs that same code on one
-``LoopState``, for the linearisation and the checks.
+The reduced plant's steps run in compiled code, a slice of steps per call
+(:mod:`pipeline.sim.mission_loop`: the rigid-body terms, the references, the compiled
+``controller_step`` of :mod:`pipeline.sim.control_step`, then q ⊕ v dt); the sampled-data
+plant's step calls the same terms and controller from Python, then its plant (eq. 29).
+:meth:`Mission.step` runs that same code on one ``LoopState``, for the linearisation and the
+checks.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import pinocchio as pin
 from tqdm import tqdm
 
 from pipeline.joint_ranges import JointRanges, outside
@@ -55,6 +56,14 @@ from pipeline.sim.margins import (
     gain_margin,
     requirement_fixes,
 )
+from pipeline.sim.mission_loop import (
+    DIVERGED,
+    FLOWN,
+    NOT_FINITE,
+    ReducedLoop,
+    fly_reduced,
+    new_clip,
+)
 from pipeline.sim.plant import held_command, integrate_held, integrate_split, limit_bus_torque
 from pipeline.sim.robot import GiordanoRobot, Terms
 from pipeline.sim.robot_file import check_null_space, check_posture_limits
@@ -75,6 +84,12 @@ from pipeline.spec import Spec
 # a velocity that stays on it has run away: the run ends there, marked ``diverged``, rather
 # than going on as a finite but meaningless "complete" log.
 DIVERGENCE_STEPS = 3
+# Steps per call of the compiled loop: Python in between (the progress bar, the log's chunks)
+# costs a few microseconds a call, nothing per step.
+SLICE_STEPS = 256
+# What a step's compiled kernels raise on a state they cannot take (a division by zero, a
+# singular solve): the run ends there, ``failed``, with the exception's words.
+STEP_ERRORS = (np.linalg.LinAlgError, FloatingPointError, ValueError, ZeroDivisionError)
 
 
 @dataclass
@@ -88,6 +103,7 @@ class LoopState:
     tau: float = 0.0
     integral: np.ndarray = field(default_factory=lambda: np.zeros(3))
     v_breve_des_prev: np.ndarray | None = None
+    gamma_vt: np.ndarray | None = None  # where the step's SVD of Γ starts (None: identity)
 
 
 @dataclass
@@ -215,27 +231,60 @@ class Mission:
             "ramp_low": ramp.low, "ramp_high": ramp.high, "ramp_floor": ramp.floor,
             "mass": robot.mass, "inverse_floor": robot.floor, "inverse_damping": robot.damping})
 
+    def _reduced_loop(self, ctrl: np.ndarray, coverage: CoverageCounter) -> ReducedLoop:
+        """The compiled loop's bundle for this run's controller vector and coverage."""
+        layout = self.layout
+        clip_flag = (layout.row["limit_flags"].start
+                     + limit_flags(layout.shape).index("sat_v_max"))
+        if not self.guidance.params.size:  # a fixed reference: the vector as it leaves it
+            self.guidance.reference_into(self._reference, 0.0, np.zeros(3))
+        return ReducedLoop(self.robot.bundle, self.guidance.params, ctrl, coverage,
+                           layout.index, clip_flag, DIVERGENCE_STEPS)
+
     def _advance(self, k: int, state: np.ndarray, rows: np.ndarray, ctrl: np.ndarray,
                  coverage: CoverageCounter) -> bool:
-        """Step k: Pinocchio at (q_k, v_k), the references, one call of the step kernel (row k
-        and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt, or the
-        sampled-data plant's motion under the held command (eq. 29). Whether the new state is
-        finite."""
-        robot, ref, at = self.robot, self._reference, self.layout.state
-        sampled = self.spec.mission.plant.model == "sampled"
-        if sampled:  # what the plant is at: (q_k, v_k), not what its sensors read
-            q_k, v_k = (self._true if self._true is not None else
-                        (state[at["q"]].copy(), state[at["v"]].copy()))
-        inputs = robot.dynamics_inputs(state[at["q"]], state[at["v"]])
+        """Step k: the terms at (q_k, v_k), the references, one call of the step kernel (row k
+        and the state of step k + 1, but q), then q_{k+1} = q_k ⊕ v_{k+1} dt (the compiled
+        loop's one step), or the sampled-data plant's motion under the held command (eq. 29).
+        Whether the new state is finite."""
+        if self.spec.mission.plant.model != "sampled":
+            status, _ = fly_reduced(self._reduced_loop(ctrl, coverage), self._reference,
+                                    state, rows, k, k + 1, new_clip())
+            return status != NOT_FINITE
+        ref, at = self._reference, self.layout.state
+        # what the plant is at: (q_k, v_k), not what its sensors read
+        q_k, v_k = (self._true if self._true is not None else
+                    (state[at["q"]].copy(), state[at["v"]].copy()))
+        inputs = self.robot.dynamics_inputs(state[at["q"]], state[at["v"]])
         self.guidance.reference_into(ref, float(state[at["tau"].start]), inputs.p_b)
         finite = controller_step(inputs, ref, ctrl, state, rows, k, coverage,
                                  self.layout.index)
-        if sampled:
-            return finite and self._hold(state, rows[k], q_k, v_k)
-        q_new = pin.integrate(robot.model, state[at["q"]], state[at["dq"]])
-        state[at["q"]] = q_new
-        # 0·x is NaN exactly when x is ±inf or NaN: one product tests all of q.
-        return finite and math.isfinite(q_new @ self._zero_q)
+        return finite and self._hold(state, rows[k], q_k, v_k)
+
+    def _fly(self, start: int, stop: int, state: np.ndarray, rows: np.ndarray,
+             ctrl: np.ndarray, coverage: CoverageCounter,
+             clip: np.ndarray) -> tuple[int, int, str]:
+        """Rows ``start`` to ``stop`` − 1 (:func:`~pipeline.sim.mission_loop.fly_reduced`'s
+        contract, for either plant): (how the slice ended, its last row, why a step failed)."""
+        if self.spec.mission.plant.model != "sampled":
+            try:
+                status, i = fly_reduced(self._reduced_loop(ctrl, coverage), self._reference,
+                                        state, rows, start, stop, clip)
+            except STEP_ERRORS as exc:  # a compiled kernel divides by zero
+                return NOT_FINITE, int(clip[1]), f"{type(exc).__name__}: {exc}"
+            return status, i, "non-finite state"
+        flag = self._reduced_loop(ctrl, coverage).clip_flag
+        for i in range(start, stop):
+            try:
+                finite = self._advance(i, state, rows, ctrl, coverage)
+            except STEP_ERRORS as exc:
+                return NOT_FINITE, i, f"{type(exc).__name__}: {exc}"
+            if not finite:
+                return NOT_FINITE, i, "non-finite state"
+            clip[0] = clip[0] + 1 if rows[i, flag] > 0.5 else 0
+            if clip[0] >= DIVERGENCE_STEPS:
+                return DIVERGED, i, ""
+        return FLOWN, stop, ""
 
     def _hold(self, state: np.ndarray, row: np.ndarray, q_k: np.ndarray,
               v_k: np.ndarray) -> bool:
@@ -309,7 +358,9 @@ class Mission:
             "q": s.q, "v": s.v, "v_c": s.v_c, "v_breve": s.v_breve, "tau": s.tau,
             "integral": s.integral, "has_prev": s.v_breve_des_prev is not None,
             "v_breve_des_prev": (np.zeros(s.v_breve.size) if s.v_breve_des_prev is None
-                                 else s.v_breve_des_prev)})
+                                 else s.v_breve_des_prev),
+            "warm": s.gamma_vt is not None,
+            "gamma_vt": np.zeros(s.v.size ** 2) if s.gamma_vt is None else s.gamma_vt.ravel()})
         rows = np.zeros((1, layout.row_size))
         self._start_sensors()
         self._advance(0, state, rows, self.controller_vector(),
@@ -321,7 +372,8 @@ class Mission:
         f = {name: state[sl].copy() for name, sl in layout.state.items()}
         nxt = LoopState(q=f["q"], v=f["v"], v_c=f["v_c"], v_breve=f["v_breve"],
                         tau=float(f["tau"][0]), integral=f["integral"],
-                        v_breve_des_prev=f["v_breve_des_prev"])
+                        v_breve_des_prev=f["v_breve_des_prev"],
+                        gamma_vt=f["gamma_vt"].reshape(s.v.size, s.v.size))
         cols = log_columns(layout, rows, self.ranges)
         return nxt, {name: value[0] for name, value in cols.items() if name not in ("t", "step")}
 
@@ -374,40 +426,37 @@ class Mission:
         if dt_map is not None and self.dt >= dt_map:
             mode, fix = self.guard_fix(s0)
             warned.append(map_warning(self.dt, dt_map, dt_damping, integrator, mode, fix))
-        clipped = 0
+        clip = new_clip()
         dt_mu_at = layout.row["dt_mu_max"].start
-        v_max_at = layout.row["limit_flags"].start + limit_flags(layout.shape).index("sat_v_max")
-        # Overflow shows as a non-finite state, caught below at the step it happens.
+        # Overflow shows as a non-finite state, caught at the step it happens.
         with np.errstate(all="ignore"), tqdm(total=n, disable=not progress, unit="step",
                                              mininterval=0.5, desc=self.spec.name) as bar:
-            for k in range(n):
-                i = k - first
-                try:
-                    finite = self._advance(i, state, rows, ctrl, coverage)
-                except (np.linalg.LinAlgError, FloatingPointError, ValueError,
-                        ZeroDivisionError) as exc:  # a compiled kernel divides by zero
-                    finite, why = False, f"{type(exc).__name__}: {exc}"
-                else:
-                    why = "non-finite state"
-                if not finite:
+            k = 0
+            while k < n:
+                start = k - first
+                stop = min(size, n - first, start + SLICE_STEPS)
+                status, i, why = self._fly(start, stop, state, rows, ctrl, coverage, clip)
+                flown = i if status == NOT_FINITE else i + 1 if status == DIVERGED else stop
+                if explicit and not warned:  # the guard's one message, at the first step past
+                    past = np.flatnonzero(rows[start:flown, dt_mu_at] > bound)
+                    if past.size:
+                        j = start + int(past[0])
+                        mode, fix = self.guard_fix(row_state(layout, rows[j]))
+                        warned.append(stability_warning(first + j, float(rows[j, dt_mu_at]),
+                                                        bound, delay + fraction, mode, fix))
+                if status == NOT_FINITE:
                     flush(i)
-                    return result("failed", k, k, f"step {k}: {why}")
-                if explicit and not warned and rows[i, dt_mu_at] > bound:
-                    mode, fix = self.guard_fix(row_state(layout, rows[i]))
-                    warned.append(stability_warning(k, float(rows[i, dt_mu_at]), bound,
-                                                    delay + fraction, mode, fix))
-                clipped = clipped + 1 if rows[i, v_max_at] > 0.5 else 0
-                if clipped >= DIVERGENCE_STEPS:
+                    return result("failed", first + i, first + i, f"step {first + i}: {why}")
+                if status == DIVERGED:
                     flush(i + 1)
                     fix = self.guard_fix(row_state(layout, rows[i]))[1]
-                    return result("diverged", k + 1, k, divergence_message(
-                        k, float(rows[i, dt_mu_at]), self.dt, fix))
-                if i + 1 == size and k + 1 < n:
+                    return result("diverged", first + i + 1, first + i, divergence_message(
+                        first + i, float(rows[i, dt_mu_at]), self.dt, fix))
+                k = first + stop
+                bar.update(stop - start)
+                if stop == size and k < n:
                     flush(size)
-                    first = k + 1
-                if progress and (k + 1) % 100 == 0:
-                    bar.update(100)
-            bar.update(n - bar.n)
+                    first = k
         flush(n - first)
         return result("complete", n)
 

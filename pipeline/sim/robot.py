@@ -5,9 +5,10 @@ v = [v_b (b frame); ω_b (b frame); q̇ (6)], Pinocchio's free-flyer convention.
 inertial (target-centred), b bus, c the whole robot's CoM, e the camera. R_xy rotates
 y-coordinates into x. The camera Jacobian is taken in the camera's LOCAL frame.
 
-One call of :meth:`GiordanoRobot.terms` runs each Pinocchio routine once per state: CRBA,
-Coriolis matrix, the joint Jacobians and their time variation (for the camera frame), and
-the centroidal map with its time variation. The dense algebra on their outputs lives in
+Pinocchio loads the model; the per-state terms (CRBA, the Coriolis matrix, the camera
+Jacobian and its time variation, the centroidal map with its time variation) come from the
+compiled :mod:`pipeline.sim.rigid_body_terms`, which the mission loop calls without Python and
+which Pinocchio checks in the tests. The dense algebra on them lives in
 :mod:`pipeline.sim.task_transform`.
 """
 
@@ -20,6 +21,8 @@ import pinocchio as pin
 
 from pipeline.shapes import Q
 from pipeline.sim import task_transform as tt
+from pipeline.sim.jit import jit
+from pipeline.sim.rigid_body_terms import dynamics_terms, placement_terms, robot_terms
 from pipeline.sim.robot_file import (
     RobotCard,
     camera_frame_id,
@@ -95,17 +98,7 @@ class GiordanoRobot:
         self.damping = spec.robot.damped_inverse.damping
         self._zero_12 = np.zeros((self.model.nv, self.model.nv))
         self._zero_12.flags.writeable = False
-        # Pinocchio writes the placements and the centroidal map in place, so views taken once
-        # follow every later call; fetching them per step would cost more than a Pinocchio
-        # routine. A binding that hands out copies instead gets the per-call accessors.
-        views = self._data_views()
-        self._views = None if any(a.flags.owndata for a in views) else views
-
-    def _data_views(self) -> tuple[np.ndarray, ...]:
-        """(R_tb, p_b, R_te, p_e, A_g, Ȧ_g) as Pinocchio's data holds them now."""
-        d, fid = self.data, self.frame_id
-        return (d.oMi[1].rotation, d.oMi[1].translation, d.oMf[fid].rotation,
-                d.oMf[fid].translation, d.Ag, d.dAg)
+        self.bundle = robot_terms(self.model, self.frame_id)  # the compiled terms' model
 
     def card(self, q: np.ndarray) -> RobotCard:
         """The robot card at configuration q, with the spec's bus and camera orientation
@@ -156,42 +149,23 @@ class GiordanoRobot:
 
     # -- per-state terms ------------------------------------------------------------------
     def kinematic_inputs(self, q: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pinocchio's outputs at q that eqs. 2–6 take: (R_tb, p_b, R_te, p_e, J_e, M), the
-        camera Jacobian in the LOCAL frame. Some are views of Pinocchio's data, valid until
-        its next call."""
-        model, data, fid = self.model, self.data, self.frame_id
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacement(model, data, fid)
-        J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
-        M = pin.crba(model, data, q)
-        R_tb, p_b, R_te, p_e, _, _ = self._views or self._data_views()
-        return R_tb, p_b, R_te, p_e, J_e, M
+        """(R_tb, p_b, R_te, p_e, J_e, M) at q: what eqs. 2–6 take, the camera Jacobian in the
+        LOCAL frame (:func:`~pipeline.sim.rigid_body_terms.placement_terms`)."""
+        return placement_terms(self.bundle, np.array(q, dtype=float))
 
     def gamma_matrices(self, q: np.ndarray) -> np.ndarray:
         """Γ(q_k) for every row of q (N×13 → N×12×12, eq. 5): the analysis' rebuild, by the
         simulator's kernels, so a Γ rebuilt from a logged q is the simulator's to the bit."""
+        q = np.array(q, dtype=float)  # a writable C copy: one compiled specialisation
         out = np.empty((len(q), self.model.nv, self.model.nv))
-        for k, qk in enumerate(q):
-            tt.gamma_into(out, k, *self.kinematic_inputs(qk), self.mass)
+        gamma_stack(self.bundle, q, self.mass, out)
         return out
 
     def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tt.DynamicsInputs:
-        """Pinocchio's outputs at (q, v) that eqs. 2–11 take, each routine run once, by name
-        (R_tb, p_b, R_te, p_e, J_e, J̇_e, M, C, A_g, Ȧ_g), camera Jacobians in the LOCAL frame.
-
-        Some are views of Pinocchio's data, valid until its next call.
-        """
-        model, data, fid = self.model, self.data, self.frame_id
-        pin.computeJointJacobiansTimeVariation(model, data, q, v)
-        pin.updateFramePlacement(model, data, fid)
-        J_e = pin.getFrameJacobian(model, data, fid, LOCAL)
-        M = pin.crba(model, data, q)
-        dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, LOCAL)
-        C = pin.computeCoriolisMatrix(model, data, q, v)
-        pin.computeCentroidalMapTimeVariation(model, data, q, v)
-        R_tb, p_b, R_te, p_e, Ag, dAg = self._views or self._data_views()
-        return tt.DynamicsInputs(R_tb=R_tb, p_b=p_b, R_te=R_te, p_e=p_e, J_e=J_e, dJ_e=dJ_e,
-                                 M=M, C=C, Ag=Ag, dAg=dAg)
+        """The terms at (q, v) that eqs. 2–11 take, by name (R_tb, p_b, R_te, p_e, J_e, J̇_e,
+        M, C, A_g, Ȧ_g), camera Jacobians in the LOCAL frame
+        (:func:`~pipeline.sim.rigid_body_terms.dynamics_terms`)."""
+        return dynamics_terms(self.bundle, np.array(q, dtype=float), np.array(v, dtype=float))
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
         """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.
@@ -200,18 +174,16 @@ class GiordanoRobot:
         and v is not used; the dynamic fields are zeros.
         """
         m = self.mass
+        # Writable C copies (a log's columns are read-only): one compiled specialisation.
+        q, v = np.array(q, dtype=float), np.array(v, dtype=float)
         if dynamics:
             d = self.dynamics_inputs(q, v)
-            # Copies: Pinocchio's arrays view its data, which the next call overwrites.
-            d = d._replace(R_tb=d.R_tb.copy(), p_b=d.p_b.copy(), R_te=d.R_te.copy(),
-                           p_e=d.p_e.copy())
-            t = tt.full_transform(d, m, self.floor, self.damping, v)
+            t = tt.full_transform(d, m, self.floor, self.damping, v, np.empty((0, 0)))
             return Terms(d.R_tb, d.p_b, t.p_c, d.p_e, d.R_te, t.p_bc, t.J_bar_v, t.J_oplus,
                          t.J_oplus_inv, t.G_wb, t.gamma, t.gamma_inv, t.gamma_dot, d.M, d.C,
                          t.M_hat, t.C_hat, float(t.s_min_J), float(t.kappa_J),
                          float(t.s_min_G), float(t.kappa_G))
         R_tb, p_b, R_te, p_e, J_e, M = self.kinematic_inputs(q)
-        R_tb, p_b, R_te, p_e = R_tb.copy(), p_b.copy(), R_te.copy(), p_e.copy()
         (p_bc, p_c, _, _, J_bar_v, J_oplus, G_wb, J_inv, s_min_J, kappa_J, gamma,
          gamma_inv) = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, m, self.floor,
                                         self.damping)
@@ -220,3 +192,12 @@ class GiordanoRobot:
         return Terms(R_tb, p_b, p_c, p_e, R_te, p_bc, J_bar_v, J_oplus, J_inv, G_wb, gamma,
                      gamma_inv, z, M, z, z, z, float(s_min_J), float(kappa_J),
                      float(s_min_G), float(kappa_G))
+
+
+@jit
+def gamma_stack(bundle, q, mass, out):
+    """out[k] = Γ(q[k]) for every row (eq. 5): the terms and Γ of each step in one compiled
+    loop (:func:`~pipeline.sim.task_transform.gamma_of_placements`)."""
+    for k in range(q.shape[0]):
+        R_tb, p_b, R_te, p_e, J_e, M = placement_terms(bundle, q[k])
+        out[k] = tt.gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass)

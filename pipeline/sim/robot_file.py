@@ -163,7 +163,7 @@ def as_revolute(model: pin.Model) -> tuple[pin.Model, list[str]]:
     (cos θ, sin θ)) replaced by the revolute joint of the same axis, placement and body with
     the range (−∞, ∞), and the names of those joints; ``model`` itself when it has none.
 
-    One coordinate per joint, the angle θ itself: Pinocchio's integrate adds v·dt to it, so a
+    One coordinate per joint, the angle θ itself: q ⊕ v·dt adds v·dt to it, so a
     joint turning past ±π stays continuous in q (unwrapped), and the kinematics and dynamics
     are those of the (cos, sin) joint at that angle, to round-off (a ulp at most, on the
     collection's Kinova and on unaligned axes: tests/test_continuous_joints.py). Each joint's

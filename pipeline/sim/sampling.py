@@ -14,7 +14,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.sim.jit import jit
-from pipeline.sim.linalg import singular_values
+from pipeline.sim.linalg import singular_values, svd_right_from
 from pipeline.spec import ConfigSampling, Ramp
 
 
@@ -38,6 +38,16 @@ def sigma_min_and_cond(A: np.ndarray) -> tuple[float, float]:
     s = singular_values(A)
     smin = s[-1]
     return smin, (s[0] / smin if smin > 0 else np.inf)
+
+
+@jit
+def conditioning_from(A: np.ndarray, Vt_before: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """(σ_min, κ, Vᵀ) of the square A (eq. 19), its SVD started from ``Vt_before``, the right
+    vectors of the step before (:func:`pipeline.sim.linalg.svd_right_from`; empty: from the
+    identity, and σ_min and κ are :func:`sigma_min_and_cond`'s to the bit)."""
+    s, Vt = svd_right_from(A, Vt_before)
+    smin = s[-1]
+    return smin, (s[0] / smin if smin > 0 else np.inf), Vt
 
 
 @jit

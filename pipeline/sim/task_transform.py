@@ -2,7 +2,7 @@
 
 Pure functions of arrays for one state, compiled with Numba: a step needs some thirty small
 dense products, and at a few microseconds of NumPy call overhead each they would cost ten
-times the Pinocchio calls of the step. The simulator and the analysis call these same
+times the rigid-body terms of the step. The simulator and the analysis call these same
 functions, so a Γ rebuilt from a logged q is the simulator's Γ to the bit.
 
 Conventions: v = [v_b; ω_b; q̇] in Pinocchio's free-flyer convention (b frame), camera
@@ -28,11 +28,12 @@ from pipeline.sim.redundancy import (
     null_space_terms,
 )
 from pipeline.sim.rotations import skew
-from pipeline.sim.sampling import sigma_min_and_cond
+from pipeline.sim.sampling import conditioning_from
 
 
 class DynamicsInputs(NamedTuple):
-    """Pinocchio's outputs at (q, v) that eqs. 2–11 take, by name (``dynamics_inputs``)."""
+    """The rigid-body terms at (q, v) that eqs. 2–11 take, by name
+    (:func:`pipeline.sim.rigid_body_terms.dynamics_terms`)."""
 
     R_tb: np.ndarray  # bus attitude
     p_b: np.ndarray  # bus origin, t frame
@@ -64,6 +65,7 @@ class Transform(NamedTuple):
     C_hat: np.ndarray
     s_min_G: float
     kappa_G: float
+    gamma_vt: np.ndarray  # Γ's right singular vectors, the next step's start (eq. 19)
 
 
 @jit
@@ -221,10 +223,11 @@ def gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 
 @jit
-def full_transform(d, mass, floor, damping, v):
-    """Eqs. 2–9 and 19 (37 for a redundant arm) in one call from Pinocchio's outputs ``d``
+def full_transform(d, mass, floor, damping, v, gamma_vt):
+    """Eqs. 2–9 and 19 (37 for a redundant arm) in one call from the rigid-body terms ``d``
     (``DynamicsInputs``) at (q, v): :func:`task_transform`'s terms, then Γ̇, M̂, Ĉ and Γ's
-    (σ_min, κ), as a ``Transform``."""
+    (σ_min, κ), its SVD started from ``gamma_vt`` (the step before's right vectors; empty:
+    from the identity), as a ``Transform``."""
     p_bc, p_c, R_eb, p_ec, J_bar_v, J_oplus, G_wb = kinematic_terms(d.R_tb, d.p_b, d.R_te,
                                                                    d.p_e, d.J_e, d.M, mass)
     R_tb = np.ascontiguousarray(d.R_tb)
@@ -236,8 +239,8 @@ def full_transform(d, mass, floor, damping, v):
     if ns.Z.shape[1] > 0:
         gamma_dot = extended_gamma_dot(gamma_dot, J_oplus, d.M, d.C, mass, ns)
     M_hat, C_hat = transformed_dynamics(d.M, d.C, gamma_inv, gamma_dot)
-    s_min_G, kappa_G = sigma_min_and_cond(gamma)
+    s_min_G, kappa_G, Vt = conditioning_from(gamma, gamma_vt)
     return Transform(p_bc=p_bc, p_c=p_c, J_bar_v=J_bar_v, J_oplus=J_oplus, G_wb=G_wb,
                      J_oplus_inv=ns.X_e, s_min_J=ns.s_min_J, kappa_J=ns.kappa_J, gamma=gamma,
                      gamma_inv=gamma_inv, gamma_dot=gamma_dot, M_hat=M_hat, C_hat=C_hat,
-                     s_min_G=s_min_G, kappa_G=kappa_G)
+                     s_min_G=s_min_G, kappa_G=kappa_G, gamma_vt=Vt)

@@ -169,7 +169,7 @@ def _gamma_dot(q: np.ndarray, v: np.ndarray):
     dJ_e = pin.getFrameJacobianTimeVariation(model, data, fid, pin.ReferenceFrame.LOCAL).copy()
     C = pin.computeCoriolisMatrix(model, data, q, v).copy()
     pin.computeCentroidalMapTimeVariation(model, data, q, v)
-    Ag, dAg = np.asfortranarray(data.Ag), np.asfortranarray(data.dAg)
+    Ag, dAg = np.ascontiguousarray(data.Ag), np.ascontiguousarray(data.dAg)  # as the step has them
     (R_tb, p_bc, _, R_eb, p_ec, J_bar_v, J_oplus, _), ns, M = _terms(q)
     R_te = data.oMf[fid].rotation.copy()
     task = gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg,
