@@ -1,4 +1,6 @@
-"""``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor.
+"""``python -m pipeline bench``: simulator and analysis cost against the Pinocchio floor (what
+Pinocchio takes for the rigid-body terms one step needs; the step computes them itself, in
+compiled code, :mod:`pipeline.sim.rigid_body_terms`).
 
 See docs/architecture.md §7.
 
@@ -7,9 +9,9 @@ repeated, and reported as median with min and max. Each repeat times the floor, 
 and the analysis back to back, and the ratios are the median of the per-repeat ratios, so a
 drift of the host's speed between repeats does not enter them:
 
-- ``floor_us``: the Pinocchio calls one step needs (CRBA, Coriolis matrix, joint Jacobians and
-  their time variation with the camera frame's Jacobian and its variation, centroidal map and
-  its time variation);
+- ``floor_us``: the Pinocchio calls that would give one step's terms (CRBA, Coriolis matrix,
+  joint Jacobians and their time variation with the camera frame's Jacobian and its
+  variation, centroidal map and its time variation);
 - ``sim_step_us``: one whole controller step of the nominal mission (both loops, guidance,
   coverage, filling the log's columns), from ``Mission.run``;
 - ``sampled_step_us``: the same mission's step on the sampled-data plant with one step of

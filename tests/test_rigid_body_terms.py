@@ -189,3 +189,27 @@ def test_the_compiled_loop_is_the_step_repeated_to_the_bit(spec_name):
         s, row = mission.step(s)
         for name in ("s_min_G", "kappa_G", "dt_mu_max", "u_cmd"):
             np.testing.assert_array_equal(row[name], cols[name][k], f"{name} {k}")
+
+
+def test_a_model_not_numbered_depth_first_is_refused():
+    """Two branches off the bus, the first's child added after the second: its subtree's
+    velocities are not one range, which the kernel's M and C need."""
+    from pipeline.errors import SpecError
+
+    model = pin.Model()
+    bus = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "bus")
+    a = model.addJoint(bus, pin.JointModelRX(), pin.SE3.Identity(), "a")
+    model.addJoint(bus, pin.JointModelRY(), pin.SE3.Identity(), "b")
+    c = model.addJoint(a, pin.JointModelRZ(), pin.SE3.Identity(), "c")
+    for j in range(1, model.njoints):
+        model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
+    frame = model.addFrame(pin.Frame("camera", c, 0, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    with pytest.raises(SpecError, match="depth first"):
+        robot_terms(model, frame)
+
+
+def test_a_start_far_from_orthonormal_is_not_a_start():
+    """A zero or arbitrary Vᵀ (a hand-built LoopState) starts from the identity, not from it."""
+    A = np.random.default_rng(8).standard_normal((12, 12))
+    for start in (np.zeros((12, 12)), 3.0 * np.eye(12)):
+        np.testing.assert_array_equal(svd_right_from(A, start)[0], singular_values(A))

@@ -46,7 +46,8 @@ from pipeline.spec import Spec
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", "u_applied",
             "attitude_excursion_deg", *LIMIT_FLAGS, JOINT_EXCESS, OUTSIDE_JOINT_RANGE]
-# The same Γ, its SVD started elsewhere than the simulator's: 1e-16 unless the log or robot changed.
+# The same Γ and the same chain of SVDs as the simulator's: 0 on a whole simulated log; a few
+# ε ‖Γ‖ (1e-16) for another source's σ; more only when the log or the robot changed.
 PROVENANCE_TOL = 1e-10
 
 

@@ -56,7 +56,7 @@ from pipeline.errors import SpecError
 from pipeline.platform import fingerprint
 from pipeline.provenance.keys import SIM_LIBRARIES, library_versions, sim_version
 from pipeline.sim.mission import LoopState, Mission
-from pipeline.sim.mission_loop import FLOWN
+from pipeline.sim.mission_loop import DIVERGED, FLOWN, NOT_FINITE
 from pipeline.spec import Spec, load_spec
 
 SCHEMA = "breve-tolerances/1"
@@ -100,13 +100,15 @@ class NudgedMission(Mission):
             return super()._fly(start, stop, state, rows, ctrl, coverage, clip)
         for i in range(start, stop):
             status, last, why = super()._fly(i, i + 1, state, rows, ctrl, coverage, clip)
-            if status != FLOWN:
+            if status == NOT_FINITE:  # no row: the run ends before it
                 return status, last, why
             for sl in (self.layout.state["q"], self.layout.state["v"]):
                 way = self.rng.integers(-1, 2, sl.stop - sl.start)  # −1, 0 or +1 ulp
                 x = state[sl]
                 state[sl] = np.where(way == 0, x, np.nextafter(x, way * np.inf))
             self.steps_nudged += 1
+            if status == DIVERGED:  # its row is logged, the last
+                return status, last, why
         return FLOWN, stop, ""
 
 

@@ -315,7 +315,7 @@ def write_row(row, at, s, tr, gamma, dt, out, u, pointing, boresight, coverage):
 
 @jit
 def controller_step(inputs, ref, ctrl, state, rows, k, coverage, shape_index):
-    """Step k of the mission from Pinocchio's outputs at (q_k, v_k) (eq. 22's order).
+    """Step k of the mission from the rigid-body terms at (q_k, v_k) (eq. 22's order).
 
     ``inputs`` is a ``DynamicsInputs``; ``ref``, ``ctrl`` and ``state`` are the flat vectors of
     ``REFERENCE_FIELDS``, ``controller_fields`` and ``state_fields`` of the arm whose places

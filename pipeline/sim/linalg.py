@@ -429,10 +429,23 @@ def _reorthonormalise_rows(P: np.ndarray) -> None:
 
 
 @jit
+def _near_orthonormal(P: np.ndarray) -> bool:
+    """Whether ‖I − P Pᵀ‖_max < ½: the rows close enough to orthonormal for the Newton–Schulz
+    step to bring them closer (it converges for ‖I − P Pᵀ‖ < 1); a zero or arbitrary matrix
+    is not a start."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1):
+            if abs((1.0 if i == j else 0.0) - dot(P[i], P[j])) >= 0.5:
+                return False
+    return True
+
+
+@jit
 def svd_right_from(A: np.ndarray, Vt_before: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """σ (descending) and Vᵀ of the square A, started from the right vectors ``Vt_before`` of
     a matrix near it (the step before's), made orthonormal again by one Newton–Schulz step;
-    from the identity if ``Vt_before`` is empty or not finite (then σ is
+    from the identity if ``Vt_before`` is empty, not finite or far from orthonormal (then σ is
     :func:`singular_values`' to the bit). NaN everywhere if A is not finite.
 
     One-sided Jacobi started from V rotates the columns of A V, which are orthogonal but for
@@ -447,11 +460,10 @@ def svd_right_from(A: np.ndarray, Vt_before: np.ndarray) -> tuple[np.ndarray, np
         s[:] = np.nan
         Vt[:] = np.nan
         return s, Vt
-    if Vt_before.shape[0] == n and _all_finite(Vt_before):
+    start = np.eye(n)
+    if Vt_before.shape[0] == n and _all_finite(Vt_before) and _near_orthonormal(Vt_before):
         start = Vt_before.copy()
         _reorthonormalise_rows(start)
-    else:
-        start = np.eye(n)
     B = matmul(start, np.ascontiguousarray(A.T))  # rows (A v_i)ᵀ: A V_start's columns
     _orthogonalise_rows(B, start)
     norms = _row_norms(B)

@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from pipeline.errors import SpecError
 from pipeline.sim.forward_dynamics import RigidTree, axis_rotation, quat_rotation, rigid_tree
 from pipeline.sim.jit import jit
 from pipeline.sim.task_transform import DynamicsInputs
@@ -69,6 +70,15 @@ def robot_terms(model: pin.Model, frame_id: int) -> RobotTerms:
         joint = model.joints[j]
         end[j] = max(end[j], joint.idx_v + joint.nv)
         end[model.parents[j]] = max(end[model.parents[j]], end[j])
+    # The kernel takes a subtree's velocities as one range: joints numbered depth first, as
+    # Pinocchio's parsers number them, each joint's velocities right after its parent's
+    # subtree so far. A model built otherwise is refused, not given a wrong M and C.
+    for j in range(2, nj):
+        parent, idx = model.parents[j], model.joints[j].idx_v
+        if not (parent < j and model.joints[parent].idx_v < idx < end[parent]):
+            raise SpecError(f"joint {model.names[j]!r}: the joints are not numbered depth "
+                            "first; the compiled rigid-body terms need a subtree's velocities "
+                            "in one range")
     return RobotTerms(
         tree=tree,
         mass=np.array([model.inertias[j].mass for j in range(nj)]),

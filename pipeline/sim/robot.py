@@ -168,7 +168,7 @@ class GiordanoRobot:
         return dynamics_terms(self.bundle, np.array(q, dtype=float), np.array(v, dtype=float))
 
     def terms(self, q: np.ndarray, v: np.ndarray, dynamics: bool = True) -> Terms:
-        """All terms of eqs. 1–11 at (q, v); each Pinocchio routine runs once.
+        """All terms of eqs. 1–11 at (q, v), from one call of the compiled rigid-body terms.
 
         With ``dynamics=False`` only the kinematic terms (Γ, Γ⁻¹, conditioning) are computed
         and v is not used; the dynamic fields are zeros.

@@ -241,8 +241,10 @@ def _c_breve() -> Outcome:
                    "C̆, C_c, skew residual: " + ", ".join(fmt(x) for x in d))
 
 
-@check("19", "one-pass (σ_min, κ) vs numpy.linalg.norm(A, −2) and numpy.linalg.cond(A); "
-       "one SVD call; NaN → None", "pipeline.sim.sampling.sigma_min_and_cond")
+@check("19", "one-pass (σ_min, κ) vs numpy.linalg.norm(A, −2) and numpy.linalg.cond(A), from "
+       "the identity and (the simulator's) from a nearby matrix's right vectors; one SVD call; "
+       "NaN → None", "pipeline.sim.sampling.sigma_min_and_cond",
+       "pipeline.sim.sampling.conditioning_from")
 def _sigma_min_and_cond() -> Outcome:
     from pipeline.sim import sampling
 
@@ -259,6 +261,12 @@ def _sigma_min_and_cond() -> Outcome:
         smin, kappa = sampling.sigma_min_and_cond(A)
         ref_s = np.linalg.norm(A, -2)
         diffs += [abs(smin - ref_s) / ref_s, abs(kappa - np.linalg.cond(A, 2)) / kappa]
+        if shape[0] == shape[1]:  # the step's chain: the next matrix from this one's vectors
+            _, _, Vt = sampling.conditioning_from(A, np.empty((0, 0)))
+            B = A + 1e-3 * g.standard_normal(shape)
+            smin, kappa, _ = sampling.conditioning_from(B, Vt)
+            ref_s = np.linalg.norm(B, -2)
+            diffs += [abs(smin - ref_s) / ref_s, abs(kappa - np.linalg.cond(B, 2)) / kappa]
     bad = A.copy()
     bad[0, 0] = np.nan
     if sampling.sigma_min(bad) is not None:
