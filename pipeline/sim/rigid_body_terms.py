@@ -66,16 +66,19 @@ def robot_terms(model: pin.Model, frame_id: int) -> RobotTerms:
     frame = model.frames[frame_id]
     nj = model.njoints
     end = np.zeros(nj, dtype=np.int64)
+    count = np.zeros(nj, dtype=np.int64)  # the velocities of each joint's subtree
     for j in range(nj - 1, 0, -1):  # a joint's subtree ends where its last descendant's does
-        joint = model.joints[j]
+        joint, parent = model.joints[j], model.parents[j]
         end[j] = max(end[j], joint.idx_v + joint.nv)
-        end[model.parents[j]] = max(end[model.parents[j]], end[j])
-    # The kernel takes a subtree's velocities as one range: joints numbered depth first, as
-    # Pinocchio's parsers number them, each joint's velocities right after its parent's
-    # subtree so far. A model built otherwise is refused, not given a wrong M and C.
-    for j in range(2, nj):
-        parent, idx = model.parents[j], model.joints[j].idx_v
-        if not (parent < j and model.joints[parent].idx_v < idx < end[parent]):
+        count[j] += joint.nv
+        if parent > 0:
+            end[parent] = max(end[parent], end[j])
+            count[parent] += count[j]
+    # The kernel takes a subtree's velocities as one range from the joint's own: joints
+    # numbered depth first, as Pinocchio's parsers number them. A model built otherwise is
+    # refused, not given a wrong M and C.
+    for j in range(1, nj):
+        if end[j] - model.joints[j].idx_v != count[j]:
             raise SpecError(f"joint {model.names[j]!r}: the joints are not numbered depth "
                             "first; the compiled rigid-body terms need a subtree's velocities "
                             "in one range")
