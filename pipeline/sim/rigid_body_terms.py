@@ -21,6 +21,12 @@ module computes the same quantities by the same algorithms on the model's own nu
 - the camera frame's LOCAL Jacobian ᵒX_e⁻¹ J and its variation ᵒX_e⁻¹ J̇ − v_e × ᵒX_e⁻¹ J
   (``getFrameJacobianTimeVariation``).
 
+The spatial quantities are taken with world axes about the bus origin, not the target's (t):
+about a far origin the inertias' m ĉ ĉ and the velocities' p × ω would cancel digits (a robot
+1 km out would lose twelve of them in M), about the bus only the arm's size enters. M, C, the
+camera's LOCAL Jacobians and the centroidal maps about the CoM do not depend on that choice;
+p_b and p_e are handed back in t.
+
 Independent of Pinocchio's code, checked against it to round-off (tests/test_rigid_body_terms.py);
 the two differ in their last bits (another order of the same sums).
 """
@@ -252,6 +258,7 @@ def _terms(bundle, q, v):
     B = np.zeros((nj, 6, 6))
     Rl = np.empty((3, 3))
     pl = np.empty(3)
+    origin = np.empty(3)  # the bus origin in t
     X = np.empty((6, 6))
     h = np.empty(6)
     e = np.zeros(6)
@@ -263,6 +270,9 @@ def _terms(bundle, q, v):
             for b in range(3):
                 R[j, a, b] = Rpar[a, 0] * Rl[0, b] + Rpar[a, 1] * Rl[1, b] + Rpar[a, 2] * Rl[2, b]
             p[j, a] = ppar[a] + Rpar[a, 0] * pl[0] + Rpar[a, 1] * pl[1] + Rpar[a, 2] * pl[2]
+        if j == 1:  # the frame's origin moves to the bus (module docstring)
+            origin[:] = p[1]
+            p[1, :] = 0.0
         # the joint's world columns J = ᵒX_j S_j and their variation ᵒv_j × J
         for d in range(6 if j == 1 else 1):
             e[:] = 0.0
@@ -406,10 +416,12 @@ def _terms(bundle, q, v):
     Rc, pc, Rf, pf = R[jc], p[jc], cam.placement_R, cam.placement_p
     R_te = np.empty((3, 3))
     p_e = np.empty(3)
+    p_rel = np.empty(3)  # the camera from the bus origin, t axes
     for a in range(3):
         for b in range(3):
             R_te[a, b] = Rc[a, 0] * Rf[0, b] + Rc[a, 1] * Rf[1, b] + Rc[a, 2] * Rf[2, b]
-        p_e[a] = pc[a] + Rc[a, 0] * pf[0] + Rc[a, 1] * pf[1] + Rc[a, 2] * pf[2]
+        p_rel[a] = pc[a] + Rc[a, 0] * pf[0] + Rc[a, 1] * pf[1] + Rc[a, 2] * pf[2]
+        p_e[a] = origin[a] + p_rel[a]
     v_frame = np.empty(6)
     _act_inv_motion(Rf, pf, vel[jc], v_frame)
     J_e = np.zeros((6, nv))
@@ -420,12 +432,12 @@ def _terms(bundle, q, v):
     while anc > 0:
         a_iv = tree.v_index[anc]
         for d in range(a_iv, a_iv + (6 if anc == 1 else 1)):
-            _act_inv_motion(R_te, p_e, Jt[d], jl)
-            _act_inv_motion(R_te, p_e, dJt[d], djl)
+            _act_inv_motion(R_te, p_rel, Jt[d], jl)
+            _act_inv_motion(R_te, p_rel, dJt[d], djl)
             _motion_cross(v_frame, jl, h)
             for a in range(6):
                 J_e[a, d] = jl[a]
                 dJ_e[a, d] = djl[a] - h[a]
         anc = tree.parent[anc]
-    return DynamicsInputs(R_tb=R[1].copy(), p_b=p[1].copy(), R_te=R_te, p_e=p_e, J_e=J_e,
+    return DynamicsInputs(R_tb=R[1].copy(), p_b=origin, R_te=R_te, p_e=p_e, J_e=J_e,
                           dJ_e=dJ_e, M=M, C=C, Ag=Ag, dAg=dAg)
