@@ -131,7 +131,7 @@ def axis_rotation(k: np.ndarray, angle: float) -> np.ndarray:
 
 
 @jit
-def _motion_inverse(R: np.ndarray, p: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+def motion_inverse(R: np.ndarray, p: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
     """out = ^iX_λ m: a parent-frame motion [v; ω] in the child frame of (R, p)
     (ω_c = Rᵀ ω, v_c = Rᵀ (v − p × ω))."""
     w0, w1, w2 = m[3], m[4], m[5]
@@ -162,7 +162,7 @@ def _force_to_parent(R: np.ndarray, p: np.ndarray, f: np.ndarray, out: np.ndarra
 
 
 @jit
-def _motion_cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+def motion_cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     """out = a × b of motions [v; ω]: [ω_a × v_b + v_a × ω_b; ω_a × ω_b]."""
     x0, x1, x2 = _cross3(a[3], a[4], a[5], b[0], b[1], b[2])
     y0, y1, y2 = _cross3(a[0], a[1], a[2], b[3], b[4], b[5])
@@ -192,7 +192,7 @@ def _inertia_to_parent(R: np.ndarray, p: np.ndarray, Ia: np.ndarray, out: np.nda
     for k in range(6):
         e[:] = 0.0
         e[k] = 1.0
-        _motion_inverse(R, p, e, m)
+        motion_inverse(R, p, e, m)
         for i in range(6):
             s = 0.0
             for j in range(6):
@@ -240,10 +240,10 @@ def forward_dynamics(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndar
         for a in range(3):
             for b in range(3):
                 R[j, a, b] = Rp[a, 0] * RJ[0, b] + Rp[a, 1] * RJ[1, b] + Rp[a, 2] * RJ[2, b]
-        _motion_inverse(R[j], p[j], vel[par], vel[j])
+        motion_inverse(R[j], p[j], vel[par], vel[j])
         for a in range(6):
             vel[j, a] += vJ[a]
-        _motion_cross(vel[j], vJ, c[j])
+        motion_cross(vel[j], vJ, c[j])
         for a in range(6):
             s = 0.0
             for b in range(6):
@@ -284,7 +284,7 @@ def forward_dynamics(tree: RigidTree, q: np.ndarray, v: np.ndarray, tau: np.ndar
         out[tree.v_index[1] + a] = qdd[a]
     for j in range(2, nj):
         par, iv, k = tree.parent[j], tree.v_index[j], tree.axis[j]
-        _motion_inverse(R[j], p[j], acc[par], acc[j])
+        motion_inverse(R[j], p[j], acc[par], acc[j])
         s = u[j]
         for a in range(6):
             acc[j, a] += c[j, a]

@@ -39,7 +39,14 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import SpecError
-from pipeline.sim.forward_dynamics import RigidTree, axis_rotation, quat_rotation, rigid_tree
+from pipeline.sim.forward_dynamics import (
+    RigidTree,
+    axis_rotation,
+    motion_cross,
+    motion_inverse,
+    quat_rotation,
+    rigid_tree,
+)
 from pipeline.sim.jit import jit
 from pipeline.sim.task_transform import DynamicsInputs
 
@@ -112,29 +119,6 @@ def _act_motion(R, p, m, out):
     out[1] = l1 + p[2] * w0 - p[0] * w2
     out[2] = l2 + p[0] * w1 - p[1] * w0
     out[3], out[4], out[5] = w0, w1, w2
-
-
-@jit
-def _act_inv_motion(R, p, m, out):
-    """out = ᵒX⁻¹ m for the placement (R, p): [Rᵀ (v − p × ω); Rᵀ ω]."""
-    l0 = m[0] - (p[1] * m[5] - p[2] * m[4])
-    l1 = m[1] - (p[2] * m[3] - p[0] * m[5])
-    l2 = m[2] - (p[0] * m[4] - p[1] * m[3])
-    w0, w1, w2 = m[3], m[4], m[5]
-    for i in range(3):
-        out[i] = R[0, i] * l0 + R[1, i] * l1 + R[2, i] * l2
-        out[3 + i] = R[0, i] * w0 + R[1, i] * w1 + R[2, i] * w2
-
-
-@jit
-def _motion_cross(a, b, out):
-    """out = a × b of motions [v; ω]: [ω_a × v_b + v_a × ω_b; ω_a × ω_b]."""
-    out[0] = a[4] * b[2] - a[5] * b[1] + a[1] * b[5] - a[2] * b[4]
-    out[1] = a[5] * b[0] - a[3] * b[2] + a[2] * b[3] - a[0] * b[5]
-    out[2] = a[3] * b[1] - a[4] * b[0] + a[0] * b[4] - a[1] * b[3]
-    out[3] = a[4] * b[5] - a[5] * b[4]
-    out[4] = a[5] * b[3] - a[3] * b[5]
-    out[5] = a[3] * b[4] - a[4] * b[3]
 
 
 @jit
@@ -284,7 +268,7 @@ def _terms(bundle, q, v):
         _world_inertia(R[j], p[j], bundle.mass[j], bundle.com[j], bundle.inertia_c[j], Y[j])
         if not rates:
             continue
-        _act_inv_motion(Rl, pl, vel[par], vel[j])
+        motion_inverse(Rl, pl, vel[par], vel[j])
         if j == 1:
             for a in range(6):
                 vel[j, a] += v[iv + a]
@@ -293,7 +277,7 @@ def _terms(bundle, q, v):
                 vel[j, 3 + a] += tree.axis[j, a] * v[iv]
         _act_motion(R[j], p[j], vel[j], ov[j])
         for d in range(iv, iv + (6 if j == 1 else 1)):
-            _motion_cross(ov[j], Jt[d], dJt[d])
+            motion_cross(ov[j], Jt[d], dJt[d])
         _inertia_variation(Y[j], ov[j], X, dY[j])
         # Pinocchio's B_j = Y.variation(½ ᵒv) − (½ Y ᵒv)×̄ (the variation is linear in v)
         for a in range(6):
@@ -423,7 +407,7 @@ def _terms(bundle, q, v):
         p_rel[a] = pc[a] + Rc[a, 0] * pf[0] + Rc[a, 1] * pf[1] + Rc[a, 2] * pf[2]
         p_e[a] = origin[a] + p_rel[a]
     v_frame = np.empty(6)
-    _act_inv_motion(Rf, pf, vel[jc], v_frame)
+    motion_inverse(Rf, pf, vel[jc], v_frame)
     J_e = np.zeros((6, nv))
     dJ_e = np.zeros((6, nv))
     jl = np.empty(6)
@@ -432,9 +416,9 @@ def _terms(bundle, q, v):
     while anc > 0:
         a_iv = tree.v_index[anc]
         for d in range(a_iv, a_iv + (6 if anc == 1 else 1)):
-            _act_inv_motion(R_te, p_rel, Jt[d], jl)
-            _act_inv_motion(R_te, p_rel, dJt[d], djl)
-            _motion_cross(v_frame, jl, h)
+            motion_inverse(R_te, p_rel, Jt[d], jl)
+            motion_inverse(R_te, p_rel, dJt[d], djl)
+            motion_cross(v_frame, jl, h)
             for a in range(6):
                 J_e[a, d] = jl[a]
                 dJ_e[a, d] = djl[a] - h[a]
