@@ -139,6 +139,9 @@ class Mission:
         self.target = build_target(spec.target)
         self.dt = spec.mission.dt
         self.layout: StepLayout = step_layout(self.robot.shape)
+        # The row's place of the v_max clip's flag: the divergence test's (eq. 16).
+        self._clip_flag = (self.layout.row["limit_flags"].start
+                           + limit_flags(self.layout.shape).index("sat_v_max"))
         self._reference = np.zeros(REFERENCE_SIZE)
         self._zero_q = np.zeros(self.robot.model.nq)
         self._zero_v = np.zeros(self.robot.model.nv)
@@ -233,13 +236,10 @@ class Mission:
 
     def _reduced_loop(self, ctrl: np.ndarray, coverage: CoverageCounter) -> ReducedLoop:
         """The compiled loop's bundle for this run's controller vector and coverage."""
-        layout = self.layout
-        clip_flag = (layout.row["limit_flags"].start
-                     + limit_flags(layout.shape).index("sat_v_max"))
         if not self.guidance.params.size:  # a fixed reference: the vector as it leaves it
             self.guidance.reference_into(self._reference, 0.0, np.zeros(3))
         return ReducedLoop(self.robot.bundle, self.guidance.params, ctrl, coverage,
-                           layout.index, clip_flag, DIVERGENCE_STEPS)
+                           self.layout.index, self._clip_flag, DIVERGENCE_STEPS)
 
     def _advance(self, k: int, state: np.ndarray, rows: np.ndarray, ctrl: np.ndarray,
                  coverage: CoverageCounter) -> bool:
@@ -273,7 +273,6 @@ class Mission:
             except STEP_ERRORS as exc:  # a compiled kernel divides by zero
                 return NOT_FINITE, int(clip[1]), f"{type(exc).__name__}: {exc}"
             return status, i, "non-finite state"
-        flag = self._reduced_loop(ctrl, coverage).clip_flag
         for i in range(start, stop):
             try:
                 finite = self._advance(i, state, rows, ctrl, coverage)
@@ -281,7 +280,7 @@ class Mission:
                 return NOT_FINITE, i, f"{type(exc).__name__}: {exc}"
             if not finite:
                 return NOT_FINITE, i, "non-finite state"
-            clip[0] = clip[0] + 1 if rows[i, flag] > 0.5 else 0
+            clip[0] = clip[0] + 1 if rows[i, self._clip_flag] > 0.5 else 0
             if clip[0] >= DIVERGENCE_STEPS:
                 return DIVERGED, i, ""
         return FLOWN, stop, ""

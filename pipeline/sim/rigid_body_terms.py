@@ -298,82 +298,60 @@ def _terms(bundle, q, v):
         iv, end = tree.v_index[j], bundle.subtree_end[j]
         ndof = 6 if j == 1 else 1
         Yj, Bj, dYj = Y[j], B[j], dY[j]
-        if not rates:  # M alone: J_jᵀ Y J against the subtree and the ancestors
-            for r in range(iv, iv + ndof):
+        for d in range(iv, iv + ndof):
+            for a in range(6):
+                s_a = 0.0
+                s_f = 0.0
+                s_b = 0.0
+                s_d = 0.0
+                for b in range(6):
+                    s_a += Yj[a, b] * Jt[d, b]
+                    if rates:
+                        s_f += Yj[a, b] * dJt[d, b]
+                        s_b += Bj[a, b] * Jt[d, b]
+                        s_d += dYj[a, b] * Jt[d, b]
+                Agt[d, a] = s_a
+                dFt[d, a] = s_f + s_b
+                dAgt[d, a] = s_d + s_f
+        for r in range(iv, iv + ndof):
+            # against the subtree's columns: M = J_jᵀ Y J, C = J_jᵀ (Y dJ + B J)
+            for c in range(iv, end):
+                sm = 0.0
+                sc = 0.0
+                for a in range(6):
+                    sm += Jt[r, a] * Agt[c, a]
+                    if rates:
+                        sc += Jt[r, a] * dFt[c, a]
+                M[r, c] = sm
+                M[c, r] = sm
+                C[r, c] = sc
+            # against the ancestors' columns: M = (Y J_j)ᵀ J, C = (Y J_j)ᵀ dJ + J_jᵀ B J
+            if rates:
                 for a in range(6):
                     s = 0.0
                     for b in range(6):
-                        s += Yj[a, b] * Jt[r, b]
-                    Agt[r, a] = s
-            for r in range(iv, iv + ndof):
-                for c in range(iv, end):
-                    sm = 0.0
-                    for a in range(6):
-                        sm += Jt[r, a] * Agt[c, a]
-                    M[r, c] = sm
-                    M[c, r] = sm
-                anc = tree.parent[j]
-                while anc > 0:
-                    a_iv = tree.v_index[anc]
-                    for c in range(a_iv, a_iv + (6 if anc == 1 else 1)):
-                        sm = 0.0
-                        for a in range(6):
-                            sm += Agt[r, a] * Jt[c, a]
-                        M[r, c] = sm
-                        M[c, r] = sm
-                    anc = tree.parent[anc]
-            if tree.parent[j] > 0:
-                Y[tree.parent[j]] += Yj
-            continue
-        for d in range(iv, iv + ndof):
-            for a in range(6):
-                s_f = 0.0
-                s_b = 0.0
-                s_a = 0.0
-                s_d = 0.0
-                for b in range(6):
-                    s_f += Yj[a, b] * dJt[d, b]
-                    s_b += Bj[a, b] * Jt[d, b]
-                    s_a += Yj[a, b] * Jt[d, b]
-                    s_d += dYj[a, b] * Jt[d, b]
-                dFt[d, a] = s_f + s_b
-                Agt[d, a] = s_a
-                dAgt[d, a] = s_d + s_f
-        for r in range(iv, iv + ndof):
-            # against the subtree's columns: C = J_jᵀ (Y dJ + B J), M = J_jᵀ Y J
-            for c in range(iv, end):
-                sc = 0.0
-                sm = 0.0
-                for a in range(6):
-                    sc += Jt[r, a] * dFt[c, a]
-                    sm += Jt[r, a] * Agt[c, a]
-                C[r, c] = sc
-                M[r, c] = sm
-                M[c, r] = sm
-            # against the ancestors' columns: C = (Y J_j)ᵀ dJ + J_jᵀ B J
-            for a in range(6):
-                s = 0.0
-                for b in range(6):
-                    s += Jt[r, b] * Bj[b, a]
-                BJ[a] = s
+                        s += Jt[r, b] * Bj[b, a]
+                    BJ[a] = s
             anc = tree.parent[j]
             while anc > 0:
                 a_iv = tree.v_index[anc]
                 for c in range(a_iv, a_iv + (6 if anc == 1 else 1)):
-                    sc = 0.0
                     sm = 0.0
+                    sc = 0.0
                     for a in range(6):
-                        sc += Agt[r, a] * dJt[c, a] + BJ[a] * Jt[c, a]
                         sm += Agt[r, a] * Jt[c, a]
-                    C[r, c] = sc
+                        if rates:
+                            sc += Agt[r, a] * dJt[c, a] + BJ[a] * Jt[c, a]
                     M[r, c] = sm
                     M[c, r] = sm
+                    C[r, c] = sc
                 anc = tree.parent[anc]
         par = tree.parent[j]
         if par > 0:
             Y[par] += Yj
-            B[par] += Bj
-            dY[par] += dYj
+            if rates:
+                B[par] += Bj
+                dY[par] += dYj
     # The whole robot's CoM and its velocity, then A_g's and Ȧ_g's angular rows about it.
     mass = Y[1, 0, 0]
     com = np.array([Y[1, 5, 1], Y[1, 3, 2], Y[1, 4, 0]]) / mass  # Y[3:, :3] = m ĉ

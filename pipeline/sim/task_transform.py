@@ -215,14 +215,6 @@ def gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass):
 
 
 @jit
-def gamma_into(out, k, R_tb, p_b, R_te, p_e, J_e, M, mass):
-    """out[k] = :func:`gamma_of_placements` (eq. 5): the analysis' rebuild, one step at a time
-    into a preallocated stack, with no array handed back to Python."""
-    out[k] = gamma_of_placements(np.ascontiguousarray(R_tb).copy(), p_b.copy(),
-                                 np.ascontiguousarray(R_te).copy(), p_e.copy(), J_e, M, mass)
-
-
-@jit
 def full_transform(d, mass, floor, damping, v, gamma_vt):
     """Eqs. 2–9 and 19 (37 for a redundant arm) in one call from the rigid-body terms ``d``
     (``DynamicsInputs``) at (q, v): :func:`task_transform`'s terms, then Γ̇, M̂, Ĉ and Γ's
