@@ -16,6 +16,7 @@ from pipeline.analysis.confidence import (
     confidence_verdict,
     lower_bound,
     samples_needed,
+    samples_to_show,
 )
 
 
@@ -84,3 +85,19 @@ def test_the_confidence_n_samples_can_reach_is_where_their_clean_bound_meets_p(p
         assert scipy.stats.beta.ppf(1 - min(c + 1e-3, 0.999999), n, 1) < p
         assert samples_needed(p, c - 1e-9) <= n
         assert samples_needed(p, min(c + 1e-6, 0.999999)) > n
+
+
+@pytest.mark.parametrize(("k", "p", "c"), [(0, 0.9973, 0.9), (1, 0.9973, 0.9),
+                                           (16, 0.9973, 0.9), (3, 0.9, 0.95), (92, 0.99, 0.9)])
+def test_samples_to_show_are_the_least_that_show_the_target_with_k_failing(k, p, c):
+    """The least N whose exact one-sided bound from N − k passes reaches p, by SciPy's own
+    exact interval (its two-sided Clopper–Pearson at 1 − 2α has the one-sided bound at 1 − α),
+    not by this module's bound."""
+    n = samples_to_show(k, p, c)
+
+    def scipy_bound(passes: int, total: int) -> float:
+        return scipy.stats.binomtest(passes, total).proportion_ci(
+            confidence_level=1 - 2 * (1 - c), method="exact").low
+
+    assert scipy_bound(n - k, n) >= p * (1 - 1e-12)
+    assert scipy_bound(n - 1 - k, n - 1) < p

@@ -335,6 +335,8 @@ def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
     inverse's floor is not judged (the theory does not hold there), let alone a fix. The cut
     is flown from the seed missions' posture before issue 50, whose opening slew takes the arm
     below the floor (from today's posture it stays above it, and is a fix: claim C37)."""
+    from pipeline.analysis.confidence import samples_to_show
+    from pipeline.montecarlo.verdict import loop_key
     from pipeline.reports.figures import RunData
     from pipeline.reports.fixes import FIX, decisions, fix_tables
 
@@ -363,3 +365,49 @@ def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
     assert "omega_ripple_sampled_delay_dt0035" in d.fix and "not a fix" in d.fix
     assert "omega_ripple_sampled_delay_gains" not in d.fix.split("not a fix")[0]
     assert d.verdict.startswith("robots/seed_ur3_box.xml: on sampled-data plant")
+    # No study of the fix's loop: a candidate, not "the fix" (issue 52, DESIGN §8).
+    assert d.fix.startswith("Candidate fix, not the fix until a study shows it: "
+                            "omega_ripple_sampled_delay_dt0035")
+    assert ("no current Monte Carlo flies this loop across the dispersions: 852 samples, none "
+            "failing, would show p ≥ 0.9973 at 90 % confidence") in d.fix
+    fix_loop = loop_key(next(r for r in runs if r.name.endswith("_dt0035")).spec)
+    other_loop = loop_key(next(r for r in runs if r.name.endswith("_imex")).spec)
+    # A study of another loop that shows its target says nothing of this one.
+    (d,) = decisions(runs, [_verdict("elsewhere", other_loop, 852, 0, 9.0)])
+    assert d.fix.startswith("Candidate fix") and "no current Monte Carlo" in d.fix
+    (d,) = decisions(runs, [_verdict("study", fix_loop, 852, 0, 9.0)])
+    assert d.fix.startswith("Fix: omega_ripple_sampled_delay_dt0035")
+    assert "shown across the dispersions by study: 852 of 852" in d.fix
+    # C41's numbers: 760 of 852, the worst sample's GM 4.5 dB against 6 dB.
+    (d,) = decisions(runs, [_verdict("c41", fix_loop, 852, 92, 4.5)])
+    assert d.fix.startswith("Candidate fix")
+    assert ("across the dispersions c41 does not show it: 760 of 852 samples meet the "
+            "requirement") in d.fix
+    assert (f"it would take {samples_to_show(92, 0.9973, 0.9)} samples with no more than 92 "
+            "failing, or 1.5 dB more gain margin on its worst sample (7: 4.5 dB against "
+            "6 dB)") in d.fix
+    (d,) = decisions(runs, [_verdict("few", fix_loop, 32, 0, 9.0)])
+    assert d.fix.startswith("Candidate fix")
+    assert "820 more samples, none of them failing, would show it" in d.fix
+
+
+def _verdict(name: str, loop: str, n: int, failures: int, worst_gm: float):
+    """A Monte Carlo verdict of ``n`` samples, ``failures`` of them failing on gain margin,
+    the worst at ``worst_gm`` dB, judged by eq. 38 as the driver judges one."""
+    from pipeline.analysis.confidence import confidence_verdict
+    from pipeline.montecarlo.verdict import MonteCarloVerdict, RequirementWords, WorstSample
+
+    c = confidence_verdict(n - failures, n, 0.9973, 0.9)
+    shown = c.meets
+    statement = (f"{n - failures} of {n} samples meet the requirement; the pass probability "
+                 f"is at least {c.lower_bound:.5f}: " + ("shown" if shown else "NOT shown"))
+    worst = [WorstSample(f"{name}__00007", 7, [1, 7], failures == 0,
+                         [] if failures == 0 else ["gain margin"], worst_gm, 50.0, 3.0, 0.9,
+                         0.0, "ω_b,z", {})]
+    return MonteCarloVerdict(
+        name=name, description="", mission="m", seed=1, samples=n, passes=n - failures,
+        errored=0, pass_fraction=(n - failures) / n, target_p=0.9973, confidence=0.9,
+        lower_bound=c.lower_bound, needed=c.needed, shown=shown, statement=statement,
+        requirement=RequirementWords(6.0, 30.0, 0.5, 1e-4, "the sampled-data plant"),
+        failures=failures, fails_by_part={}, failing_modes={}, mean_square_radius_max=None,
+        dispersions={}, worst=worst, simulated=n, wall_s=1.0, loop=loop)

@@ -265,3 +265,34 @@ def test_the_seed_montecarlo_file_is_valid():
     full_n = __import__("pipeline.analysis.confidence", fromlist=["x"]).samples_needed(0.9973, 0.9)
     assert full_n == 852
     assert pin  # the dispersed body is Pinocchio's (imported for the fixture's robots)
+
+
+def test_a_study_and_a_run_of_the_same_loop_share_its_key():
+    """loop_key: C41's study (seed_dispersions: the dt 3.5 ms mission for 10 s) flies the
+    dt 3.5 ms run's loop; C44's (dt 2.5 ms, the command's arrival dispersed about none) flies
+    that mission's loop at 2.5 ms, not at 3.5 ms; and a change of gain, step, integrator, delay
+    or arrival is another loop, while the mission's length and the jitter stream's seed are
+    not."""
+    from pipeline.montecarlo.plan import nominal_spec, read_montecarlo, resolve_montecarlo
+    from pipeline.montecarlo.verdict import loop_key
+
+    def study(name: str) -> str:
+        path = resolve_montecarlo(name)
+        config = read_montecarlo(path)
+        return loop_key(nominal_spec(load_spec(config.mission, path.parent),
+                                     config).model_dump(mode="json"))
+
+    def run(changes: dict) -> str:
+        spec = with_overrides(load_spec("omega_ripple_sampled_delay_dt0035"), changes)
+        return loop_key(spec.model_dump(mode="json"))
+
+    assert study("seed_dispersions") == run({}) == run({"mission.duration": 3.0})
+    assert study("seed_latency_dt0025") == run({"mission.dt": 0.0025})
+    assert study("seed_latency_dt0025") != study("seed_dispersions")
+    timed = {"mission.plant.timing": {"delay_fraction": 0.25, "jitter": 0.5, "seed": 1}}
+    assert run(timed) == run({**timed, "mission.plant.timing": {**timed[
+        "mission.plant.timing"], "seed": 2}})
+    others = [run(c) for c in ({"controller.gains.bus.D": 1.0}, {"mission.dt": 0.003},
+                               {"controller.integrator": "imex"},
+                               {"mission.plant.delay_steps": 0}, timed)]
+    assert len({run({}), *others}) == 1 + len(others)

@@ -61,6 +61,31 @@ def lower_bound(passes: int, n: int, confidence: float) -> float:
     return float(scipy.stats.beta.ppf(1.0 - confidence, passes, n - passes + 1))
 
 
+def samples_to_show(failures: int, p: float, confidence: float) -> int:
+    """The fewest samples N that, with ``failures`` of them failing, show a pass probability
+    of at least ``p`` at ``confidence``: the least N with p_L(N − k passes of N) ≥ p (eq. 38a);
+    :func:`samples_needed` when none fail. p_L grows with N at a fixed count of failures, so
+    the least N is bracketed by doubling and then bisected."""
+    if failures < 0:
+        raise ValueError(f"failures = {failures!r}: a count of samples is 0 or more")
+    if failures == 0:
+        return samples_needed(p, confidence)
+
+    def shows(n: int) -> bool:
+        return lower_bound(n - failures, n, confidence) >= p
+
+    lo = samples_needed(p, confidence) + failures  # fewer cannot: even none failing needs that
+    if shows(lo):
+        return lo
+    hi = 2 * lo
+    while not shows(hi):
+        lo, hi = hi, 2 * hi
+    while hi - lo > 1:  # not shows(lo), shows(hi)
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if shows(mid) else (mid, hi)
+    return hi
+
+
 @dataclass(frozen=True)
 class ConfidenceVerdict:
     """Whether N samples show a pass probability of at least ``target`` at ``confidence``."""

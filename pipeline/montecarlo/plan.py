@@ -89,6 +89,11 @@ class MonteCarlo:
         return self.config.target
 
 
+def nominal_spec(base: Spec, config: MonteCarloFile) -> Spec:
+    """The spec the samples are drawn about: the mission with the file's fixed overrides."""
+    return with_overrides(base, config.set) if config.set else base
+
+
 def resolve_montecarlo(ref: str | Path) -> Path:
     """A Monte Carlo file: a path, or a name under specs/montecarlo/."""
     path = Path(ref)
@@ -285,7 +290,7 @@ def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
     indices = range(n) if only is None else [only]
     # The nominals are the fixed overrides' (a block the file sets, as mission.plant.timing,
     # can then be dispersed).
-    fixed = with_overrides(base, config.set) if config.set else base
+    fixed = nominal_spec(base, config)
     drawn = [draw_sample(name, config, fixed, i, nominals, path) for i in indices]
     budget = Budget.from_environment()  # each sample's mission within it, as `run` judges
     seconds = sum(check_mission(s.spec, budget, f"{path}: sample {s.index}").seconds

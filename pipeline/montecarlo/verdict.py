@@ -11,6 +11,7 @@ A sample whose task did not finish is no judgement: with any, there is no verdic
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass
@@ -91,6 +92,29 @@ class MonteCarloVerdict:
     wall_s: float
     key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
     file: str = ""  # the Monte Carlo file it flew (absolute), to check the key against
+    loop: str = ""  # the nominal's loop (loop_key): a run of that loop is what it judges; "":
+    # unknown (a verdict written before the key), a study of no run's loop
+
+
+def loop_key(spec: dict) -> str:
+    """Which loop a resolved spec (``Spec.model_dump(mode="json")``) flies, as a digest: its
+    robot, controller, step, plant (delay, arrival and jitter, sensors) and requirement. A run
+    and a Monte Carlo whose nominal share it fly the same loop, so the study speaks for the
+    run's loop (the decision box names a fix only where one shows it). The mission's length,
+    start and path are not the loop, nor the seeds of its noise and jitter streams; an arrival
+    with no fraction and no jitter is no timing at all (eq. 41)."""
+    mission = spec.get("mission") or {}
+    plant = dict(mission.get("plant") or {})
+    for part in ("timing", "sensors"):
+        block = plant.get(part)
+        if isinstance(block, dict):
+            plant[part] = {k: x for k, x in block.items() if k != "seed"}
+    timing = plant.get("timing")
+    if timing is not None and not timing.get("delay_fraction") and not timing.get("jitter"):
+        plant["timing"] = None
+    loop = {"robot": spec.get("robot"), "controller": spec.get("controller"),
+            "dt": mission.get("dt"), "plant": plant, "requirements": spec.get("requirements")}
+    return hashlib.sha256(json.dumps(loop, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def make_table(records: list[dict]) -> pd.DataFrame:
@@ -158,6 +182,8 @@ def mission_words(base, config) -> str:
 def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str],
           requirement: RequirementWords, wall_s: float) -> MonteCarloVerdict:
     """The verdict of the table (eqs. 38, 39); see the module docstring."""
+    from pipeline.montecarlo.plan import nominal_spec
+
     n = len(df)
     errored = int((df["status"] == "error").sum())
     passes = int(df["passes"].sum())
@@ -196,7 +222,7 @@ def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str]
         mean_square_radius_max=(float(ms.max()) if len(ms := df["mean_square_radius"].dropna())
                                 else None),
         dispersions=dispersions, worst=worst_samples(df), simulated=int(df["ran"].sum()),
-        wall_s=wall_s)
+        wall_s=wall_s, loop=loop_key(nominal_spec(base, config).model_dump(mode="json")))
 
 
 def verdict_json(v: MonteCarloVerdict) -> str:

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pipeline.analysis.confidence import samples_needed, samples_to_show
 from pipeline.analysis.joint_ranges import range_mark, range_words
 from pipeline.analysis.schema import CompleteRecord
+from pipeline.montecarlo.plan import Target
+from pipeline.montecarlo.verdict import MonteCarloVerdict, loop_key
 from pipeline.reports.figures import RunData
 
 FIX = "fix"
@@ -197,9 +200,43 @@ def _change(a: RunData, b: RunData) -> str:
     return "; ".join(parts) or "the same loop"
 
 
-def decisions(runs: list[RunData]) -> list[Decision]:
+def across_dispersions(spec: dict, studies: list[MonteCarloVerdict]) -> tuple[bool, str]:
+    """(shown, words): what the current Monte Carlos of a run's loop (``loop_key``) show of
+    it across the dispersions (eq. 38). Shown only by a study whose verdict shows its target;
+    otherwise what the best study shows and what it lacks (the samples that would show the
+    target with no more failing, or the gain margin its worst sample misses), or that none
+    flies this loop and how many samples, none failing, would show the default target."""
+    key = loop_key(spec) if spec else ""
+    mine = sorted((v for v in studies if key and v.loop == key),
+                  key=lambda v: (v.shown is True, v.samples), reverse=True)
+    if not mine:
+        t = Target()
+        return False, (f"no current Monte Carlo flies this loop across the dispersions: "
+                       f"{samples_needed(t.p, t.confidence)} samples, none failing, would "
+                       f"show p ≥ {t.p:g} at {100 * t.confidence:g} % confidence (eq. 38b)")
+    v = mine[0]
+    if v.shown is True:
+        return True, f"shown across the dispersions by {v.name}: {v.statement}"
+    if v.shown is None:
+        return False, f"{v.name}, a Monte Carlo of this loop, has no verdict: {v.statement}"
+    more = samples_to_show(v.failures, v.target_p, v.confidence)
+    lack = (f"{more - v.samples} more samples, none of them failing, would show it"
+            if v.failures == 0 else
+            f"it would take {more} samples with no more than {v.failures} failing")
+    worst = v.worst[0] if v.worst and not v.worst[0].passes else None
+    short = v.requirement.gain_margin_db - worst.gain_margin_db if worst else 0.0
+    if worst is not None and short > 0:
+        lack += (f", or {short:.3g} dB more gain margin on its worst sample ({worst.index}: "
+                 f"{worst.gain_margin_db:.3g} dB against {v.requirement.gain_margin_db:g} dB)")
+    return False, f"across the dispersions {v.name} does not show it: {v.statement}; {lack}"
+
+
+def decisions(runs: list[RunData], studies: list[MonteCarloVerdict] = ()) -> list[Decision]:
     """Per robot, on its loop of record: the cheapest run that rings, what harms, and the
-    cheapest flown fix (fewest steps per second, then the larger gain margin)."""
+    cheapest flown fix (fewest steps per second, then the larger gain margin). The fix is
+    named "Fix" only where a current Monte Carlo of its loop (``studies``: the current
+    verdicts) shows the target across the dispersions; otherwise it is a candidate, with what
+    it shows and what it lacks (:func:`across_dispersions`)."""
     by_name = {r.name: r for r in runs}
     out = []
     tables = fix_tables(runs)
@@ -230,11 +267,15 @@ def decisions(runs: list[RunData]) -> list[Decision]:
         if fixes:
             f = fixes[0]
             not_fix = [r for r in t.rows if r.verdict != FIX and not r.rings]
-            fix = (f"Fix: {f.run}, {_change(by_name[bad.run], by_name[f.run])}: every mode "
-                   f"meets {t.requirement} (least {f.least}: {f.gain_margin_db:.3g} dB, "
+            shown, study = across_dispersions(by_name[f.run].spec, list(studies))
+            fix = (("Fix: " if shown else "Candidate fix, not the fix until a study shows it: ")
+                   + f"{f.run}, {_change(by_name[bad.run], by_name[f.run])}: every mode "
+                   f"meets {t.requirement} on its nominal flight (least {f.least}: "
+                   f"{f.gain_margin_db:.3g} dB, "
                    + (f"{f.phase_margin_deg:.3g}°, " if f.phase_margin_deg is not None else "")
                    + f"{f.delay_margin_ms:.3g} ms), flown clean, at {f.steps_per_s:.4g} steps "
                    f"per second ({f.steps_per_s / bad.steps_per_s:.3g}× {bad.run}'s)"
+                   + f"; {study}"
                    + "".join(f"; not a fix: {r.run}, {r.verdict}" for r in not_fix) + "."
                    + range_mark(f.run, by_name[f.run].record.joint_ranges))
         else:

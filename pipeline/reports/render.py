@@ -418,7 +418,8 @@ def render_all(out: Path, force: bool = False, cross_check: CrossCheck | None = 
     sweeps = sweep_files(out)
     index = render("index.html.j2", out / "index.html", runs=runs, mechanisms=mechanisms,
                    ranges=joint_range_rows([*runs, *imported]),
-                   imported=imported, tables=tables, decisions=decisions(runs),
+                   imported=imported, tables=tables, decisions=decisions(
+                       runs, [m["v"] for m in montecarlos if m["current"]]),
                    figures=figs, skipped=skipped, cc=cc.summary(), claims=claims,
                    kind_counts=kind_counts(claims) if claims else "", kind_names=KIND_NAMES,
                    pages=pages, sweeps=sweeps, montecarlos=montecarlos, powers=powers,
