@@ -287,6 +287,18 @@ def _cmd_montecarlo(a: argparse.Namespace) -> int:
     return montecarlo_command(a)
 
 
+def _cmd_search(a: argparse.Namespace) -> int:
+    from pipeline.montecarlo.driver import search_command
+
+    return search_command(a)
+
+
+def _cmd_fixes(a: argparse.Namespace) -> int:
+    from pipeline.montecarlo.driver import fixes_command
+
+    return fixes_command(a)
+
+
 def _cmd_power(a: argparse.Namespace) -> int:
     from pipeline.montecarlo.power import power_command
 
@@ -614,6 +626,45 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: generated_reports/montecarlo; e.g. --out /tmp/montecarlo)")
     _study_force(m, "montecarlo")
     m.set_defaults(func=_cmd_montecarlo)
+
+    q = _stage(sub, "search", "the least change of one knob that every sample of a Monte Carlo "
+               "meets, on its own draws (eq. 43)", "seed_latency_dt0025 --knob mission.dt")
+    q.add_argument("file", help="a Monte Carlo file: a path, or a name under specs/montecarlo/ "
+                   "(e.g. seed_latency_dt0025)")
+    q.add_argument("--knob", default="mission.dt", metavar="FIELD",
+                   help="the spec field moved: mission.dt or controller.gains.<bus|cam_pos|"
+                   "cam_ori>.D (default: mission.dt; e.g. --knob controller.gains.bus.D)")
+    q.add_argument("--samples", type=_sample_count, default=None, metavar="N",
+                   help="search over the first N samples (default: the file's N; e.g. "
+                   "--samples 40)")
+    _dask_options(q)
+    q.add_argument("--logs", default="logs/montecarlo", metavar="DIR",
+                   help="the Monte Carlo's kept records, reused at the nominal value, and the "
+                   "search's, DIR/<montecarlo>/search-<knob>/ (default: logs/montecarlo; e.g. "
+                   "--logs /scratch/montecarlo)")
+    q.add_argument("--out", default="generated_reports/montecarlo", metavar="DIR",
+                   help="writes DIR/<montecarlo>/search-<knob>.json (default: "
+                   "generated_reports/montecarlo; e.g. --out /tmp/montecarlo)")
+    _study_force(q, "montecarlo")
+    q.set_defaults(func=_cmd_search)
+
+    f = _stage(sub, "fixes", "each fix of a Monte Carlo's loop flown through its samples, on "
+               "their own draws", "seed_latency_dt0025")
+    f.add_argument("file", help="a Monte Carlo file whose verdict is flown: a path, or a name "
+                   "under specs/montecarlo/ (e.g. seed_latency_dt0025)")
+    f.add_argument("--samples", type=_sample_count, default=None, metavar="N",
+                   help="the N its verdict flew (default: the file's N; e.g. --samples 40)")
+    _dask_options(f)
+    f.add_argument("--logs", default="logs/montecarlo", metavar="DIR",
+                   help="where each fix's samples' records are kept, DIR/<montecarlo>+<fix>/ "
+                   "(default: logs/montecarlo; e.g. --logs /scratch/montecarlo)")
+    f.add_argument("--out", default="generated_reports/montecarlo", metavar="DIR",
+                   help="reads DIR/<montecarlo>/verdict.json and search-*.json; writes the fix "
+                   "files in DIR/<montecarlo>/fixes/, each fix's verdict in "
+                   "DIR/<montecarlo>+<fix>/ and DIR/<montecarlo>/fixes.json (default: "
+                   "generated_reports/montecarlo; e.g. --out /tmp/montecarlo)")
+    _study_force(f, "montecarlo")
+    f.set_defaults(func=_cmd_fixes)
 
     w = _stage(sub, "power", "the ripple detectors' false alarms and misses against sensor "
                "noise", "detector_power")

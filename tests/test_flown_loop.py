@@ -410,4 +410,4 @@ def _verdict(name: str, loop: str, n: int, failures: int, worst_gm: float):
         lower_bound=c.lower_bound, needed=c.needed, shown=shown, statement=statement,
         requirement=RequirementWords(6.0, 30.0, 0.5, 1e-4, "the sampled-data plant"),
         failures=failures, fails_by_part={}, failing_modes={}, mean_square_radius_max=None,
-        dispersions={}, worst=worst, simulated=n, wall_s=1.0, loop=loop)
+        dispersions={}, worst=worst, simulated=n, wall_s=1.0, nominal_loop=loop)

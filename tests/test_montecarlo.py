@@ -296,3 +296,104 @@ def test_a_study_and_a_run_of_the_same_loop_share_its_key():
                                {"controller.integrator": "imex"},
                                {"mission.plant.delay_steps": 0}, timed)]
     assert len({run({}), *others}) == 1 + len(others)
+
+
+def test_a_fix_draws_what_the_montecarlo_drew():
+    """Common random numbers (issue 52): sample i of a fix sees sample i's inertia, the ε of
+    each dispersed gain, its arrival, jitter and their stream's seed, bitwise. The step's fix
+    holds the arrival and jitter in seconds (the file's latency_step) and the whole step of
+    delay in steps; the gain's fix moves the nominal the ε multiplies."""
+    from pipeline.montecarlo.plan import derive
+
+    mc = plan_montecarlo("seed_latency_dt0025", samples=6)
+    dt = derive(mc, {"mission.dt": 0.002}, "fix_dt")
+    gain = derive(mc, {"controller.gains.bus.D": 1.5}, "fix_gain")
+    nominal_d = 2.0  # the mission's bus D (specs/omega_ripple_sampled_delay_dt0035.yaml)
+    assert with_overrides(load_spec("omega_ripple_sampled_delay_dt0035"), {}).controller.gains \
+        .bus.D == nominal_d
+    for base, a, b in zip(mc.samples, dt.samples, gain.samples, strict=True):
+        assert a.seed == b.seed == base.seed and a.index == base.index
+        assert a.draws == base.draws  # every draw, bitwise
+        assert {k: x for k, x in b.draws.items() if k != "controller.gains.bus.D"} == {
+            k: x for k, x in base.draws.items() if k != "controller.gains.bus.D"}
+        # the same ε on the new nominal: D = nominal·(1 + ε)
+        eps = base.draws["controller.gains.bus.D"] / nominal_d - 1
+        assert b.draws["controller.gains.bus.D"] == pytest.approx(1.5 * (1 + eps), rel=1e-15)
+        sa, sb, s0 = a.spec, b.spec, base.spec
+        assert sa.robot.inertial == sb.robot.inertial == s0.robot.inertial
+        assert sa.mission.plant.delay_steps == s0.mission.plant.delay_steps == 1
+        t0, ta = s0.mission.plant.timing, sa.mission.plant.timing
+        assert ta.seed == sb.mission.plant.timing.seed == t0.seed
+        assert sb.mission.plant.timing == t0  # the gain's fix keeps the step and the latency
+        # the same seconds: 2.5 ms steps' fraction at 2 ms steps
+        assert ta.delay_fraction * 0.002 == pytest.approx(t0.delay_fraction * 0.0025, rel=1e-15)
+        assert ta.jitter * 0.002 == pytest.approx(t0.jitter * 0.0025, rel=1e-15)
+        assert sa.controller == s0.controller and sa.mission.dt == 0.002
+    # C41's file holds its whole-step delay in steps and has no latency in seconds: a step's
+    # fix changes nothing else.
+    c41 = plan_montecarlo("seed_dispersions", samples=4)
+    for base, a in zip(c41.samples, derive(c41, {"mission.dt": 0.002}, "x").samples,
+                       strict=True):
+        assert a.draws == base.draws
+        assert a.spec.mission.plant == base.spec.mission.plant
+    # A step the latency does not fit in is refused, naming the field and the least step.
+    with pytest.raises(SpecError, match=r"latency_step.*fly a step of at least"):
+        derive(mc, {"mission.dt": 0.0012}, "too_small")
+
+
+HOT = """\
+description: test search
+mission: omega_ripple_sampled_delay_dt0035
+set:
+  mission.duration: 3.0
+  mission.dt: 0.0025
+  mission.plant.timing: {delay_fraction: 0.0, jitter: 0.0}
+  controller.gains.bus.D: 2.4
+seed: 35
+samples: 10
+target: {p: 0.9973, confidence: 0.90}
+ripple_max: 1.0e-4
+latency_step: 0.0025
+dispersions:
+  body.bus.inertia: {dist: uniform, rel: [0.0, 0.0, 0.2]}
+  controller.gains.bus.D: {dist: uniform, rel: 0.1}
+  mission.plant.timing.delay_fraction: {dist: uniform, low: 0.0, high: 0.5}
+  mission.plant.timing.jitter: {dist: uniform, low: 0.0, high: 0.25}
+  mission.plant.timing.seed: {dist: seed}
+"""
+
+
+@pytest.mark.slow
+def test_the_least_step_and_its_fixes_fly_on_the_same_draws(tmp_path):
+    """Ten samples of the seed robot at dt 2.5 ms with the bus damping raised to 2.4 and the
+    latency in seconds, two failing on the bus yaw's gain margin: the search finds the least
+    step every sample meets (each sample flown at the nominal reused from the Monte Carlo's
+    records); the fixes fly imex and that step through the same samples, all of which meet it
+    (the worst at the required margin: the sample that set it); a fix's sample re-run alone is
+    the bits its record holds."""
+    from pipeline.montecarlo.fixes import read_fixes
+    from pipeline.montecarlo.sealed import unseal
+
+    path = _write(tmp_path, HOT, "hot")
+    args = ("--logs", tmp_path / "l", "--out", tmp_path / "o")
+    assert run_cli("montecarlo", path, *args, timeout=300).returncode == 0
+    v = read_verdict(tmp_path / "o" / "hot" / "verdict.json")
+    assert v.failures == 2 and not v.shown
+    r = run_cli("search", path, "--knob", "mission.dt", *args, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "mission.dt = 0.0025: 10 samples, 2 failing" in r.stderr  # the kept records
+    s = unseal((tmp_path / "o" / "hot" / "search-mission.dt.json").read_text())
+    chosen, set_by = s["search"]["chosen"], s["search"]["set_by"]
+    assert 0.0015 < chosen < 0.0025 and s["search"]["violations"] == []
+    assert set_by == v.worst[0].index  # the least margin sets the least step
+    r = run_cli("fixes", path, *args, timeout=300)
+    assert r.returncode == 0, r.stderr
+    fixes = {f.slug: f for f in read_fixes(tmp_path / "o" / "hot" / "fixes.json").fixes}
+    assert set(fixes) == {"imex", "dt"}
+    assert fixes["dt"].passes == fixes["dt"].samples == 10
+    assert fixes["dt"].worst_gain_margin_db == pytest.approx(6.0, abs=0.05)
+    assert fixes["dt"].steps_per_s == pytest.approx(1 / chosen)
+    assert "in seconds (a transport latency" in fixes["dt"].delay_held
+    alone = run_cli("montecarlo", fixes["dt"].file, "--sample", str(set_by), "--logs",
+                    tmp_path / "l", timeout=300)
+    assert alone.returncode == 0 and "the same bits" in alone.stdout, alone.stderr

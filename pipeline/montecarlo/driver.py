@@ -56,6 +56,11 @@ def requirement_of(mc: MonteCarlo) -> RequirementWords:
              else f"{plant.delay_steps} step(s) of delay")
     loop = ("the simulator's update (reduced plant)" if plant.model == "reduced" else
             f"the sampled-data plant, {delay}")
+    if plant.model == "sampled" and (drawn or plant.delay_steps or timed):
+        loop += ("; the whole steps of delay held in steps (a computation delay of one period)"
+                 + (f", the arrival and jitter in seconds (a transport latency, counted in "
+                    f"steps of {1e3 * mc.config.latency_step:g} ms)" if mc.config.latency_step
+                    else ", the arrival and jitter in steps" if timed else ""))
     return RequirementWords(r.gain_margin_db, r.phase_margin_deg, r.delay_margin_steps,
                             mc.config.ripple_max, loop)
 
@@ -214,3 +219,191 @@ def run_one(args: argparse.Namespace) -> int:
                         "Monte Carlo recorded")
     return 0
 
+
+
+def search_command(args: argparse.Namespace) -> int:
+    """``python -m pipeline search FILE --knob KNOB``: the least change of the knob that every
+    sample of the Monte Carlo meets, on its own draws (eq. 43), written to
+    ``<out>/<montecarlo>/search-<knob>.json``."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.plan import derive, nominal_spec
+    from pipeline.montecarlo.search import KNOBS
+
+    mc = plan_montecarlo(args.file, args.samples)
+    if args.knob not in KNOBS:
+        raise SpecError(f"--knob {args.knob}: not a knob the search moves (one of "
+                        f"{', '.join(KNOBS)})")
+    value = nominal_spec(mc.base, mc.config).model_dump(mode="json")
+    for part in args.knob.split("."):
+        value = value[part]
+    nominal = float(value)
+    derive(mc, {args.knob: nominal}, mc.name, [0])  # the knob's field as the spec has it
+    return _search(args, mc, nominal)
+
+
+def _least_step(mc: MonteCarlo, knob: str):
+    """Where the knob is the step and the latency is held in seconds (``latency_step``), the
+    least step each sample's arrival and jitter fit in (eq. 41: the command arrives within the
+    step), a billionth above; None otherwise (any step)."""
+    if knob != "mission.dt" or mc.config.latency_step is None:
+        return None
+    by_index = {s.index: s.spec for s in mc.samples}
+
+    def least(i: int) -> float:
+        timing = by_index[i].mission.plant.timing
+        if timing is None:
+            return 0.0
+        return (timing.delay_fraction + timing.jitter) * by_index[i].mission.dt * (1 + 1e-9)
+    return least
+
+
+def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
+    from pipeline.montecarlo.owner import check_start, claim_folders
+    from pipeline.montecarlo.plan import derive
+    from pipeline.montecarlo.sealed import sealed_json
+    from pipeline.montecarlo.search import (
+        KNOBS,
+        Outcome,
+        SearchResult,
+        least_change,
+        statement,
+    )
+    from pipeline.montecarlo.verdict import judge, make_table
+    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
+    from pipeline.sweep.driver import check_writable
+
+    knob = args.knob
+    root = Path(args.logs).resolve() / mc.name
+    searched = root / f"search-{knob}"
+    out = Path(args.out).resolve() / mc.name
+    for folder in (root, out):
+        check_writable(folder)
+    options = ClusterOptions(
+        scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
+        slurm_log_dir=root.parent / ".slurm",
+        worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
+    check_start("montecarlo", mc.name, mc.path, (root, out), options, mc.seconds,
+                [s.spec.name for s in mc.samples], args.force)
+    by_index = {s.index: s for s in mc.samples}
+    t0 = time.perf_counter()
+    with open_client(options) as session:
+        claim_folders("montecarlo", mc.name, mc.path, (root, out), args.force)
+
+        def fly(value: float, which: list[int]) -> dict:
+            if value == nominal:  # the Monte Carlo's own samples and kept records
+                sub, folder = replace(mc, samples=[by_index[i] for i in which]), root
+            else:
+                name = f"{mc.name}@{value:.9g}"
+                sub, folder = derive(mc, {knob: value}, name, which), searched / name
+            records = run_montecarlo(sub, folder, session.client, sys.stderr.isatty(),
+                                     options.worker_timeout, session.jobs)
+            bad = [r for r in records if r["status"] == "error"]
+            if bad:
+                raise RunFailed(f"search {mc.name} {knob} = {value:.9g}: sample "
+                                f"{bad[0]['index']} did not finish ({bad[0]['error']}); the "
+                                "same command resumes from the kept records")
+            fails = sum(not r["passes"] for r in records)
+            print(f"search {mc.name}: {knob} = {value:.9g}: {len(records)} samples, {fails} "
+                  "failing", file=sys.stderr)
+            return {int(r["index"]): Outcome(bool(r["passes"]), float(r["gain_margin_db"]))
+                    for r in records}
+
+        found = replace(least_change(nominal, sorted(by_index),
+                                     mc.base.requirements.gain_margin_db, fly,
+                                     seed=mc.config.seed, floor=_least_step(mc, knob)),
+                        knob=knob)
+        p, c = mc.target.p, mc.target.confidence
+        certified, words, cost = statement(found, p, c)
+        verification = ""
+        if found.chosen is not None and not found.monotone:
+            fresh = derive(mc, {knob: found.chosen}, f"{mc.name}@{found.chosen:.9g}-fresh",
+                           seed=mc.config.seed + 1)
+            recs = run_montecarlo(fresh, searched / fresh.name, session.client,
+                                  sys.stderr.isatty(), options.worker_timeout, session.jobs)
+            v = judge(make_table(recs), fresh.name, fresh.config, fresh.base, {},
+                      requirement_of(fresh), 0.0)
+            verification = (f"a fresh Monte Carlo at {knob} = {found.chosen:.6g} (seed "
+                            f"{fresh.config.seed}): {v.statement}")
+            certified = bool(v.shown)
+    result = SearchResult(
+        montecarlo=mc.name, knob=knob, knob_words=KNOBS[knob], loop=requirement_of(mc).loop,
+        required_gain_margin_db=mc.base.requirements.gain_margin_db, target_p=p,
+        confidence=c, risk=found.risk(p), certified=certified, statement=words, cost=cost,
+        verification=verification, search=found, wall_s=time.perf_counter() - t0,
+        key=f"{result_key(mc.path, len(mc.samples))}, knob {knob}",
+        file=str(Path(mc.path).resolve()))
+    out.mkdir(parents=True, exist_ok=True)
+    target = out / f"search-{knob}.json"
+    from dataclasses import asdict
+
+    atomic_write_text(target, sealed_json(asdict(result), indent=1))
+    print(f"search {mc.name} {knob}: {words}" + (f"; cost: {cost}" if cost else "")
+          + (f"; {verification}" if verification else "") + f" -> {target}")
+    return 0
+
+
+def current_searches(mc: MonteCarlo, folder: Path) -> list[dict]:
+    """The search results beside a Monte Carlo's verdict made from its file as it is now, by
+    this code (``search-<knob>.json``; a damaged or stale one is not read)."""
+    from pipeline.montecarlo.sealed import unseal
+
+    key = result_key(mc.path, len(mc.samples))
+    out = []
+    for path in sorted(folder.glob("search-*.json")):
+        try:
+            data = unseal(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if data.get("key") == f"{key}, knob {data.get('knob')}":
+            out.append(data)
+    return out
+
+
+def fixes_command(args: argparse.Namespace) -> int:
+    """``python -m pipeline fixes FILE``: each fix of the Monte Carlo's loop flown through its
+    samples (:mod:`pipeline.montecarlo.fixes`), after the Monte Carlo and its searches."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.fixes import (
+        FIXES_NAME,
+        FlownFix,
+        fix_changes,
+        summarise,
+        write_fix_file,
+        write_fixes,
+    )
+    from pipeline.montecarlo.studies import is_current
+    from pipeline.montecarlo.verdict import VERDICT_NAME, read_verdict
+
+    mc = plan_montecarlo(args.file, args.samples)
+    out = Path(args.out).resolve()
+    verdict_path = out / mc.name / VERDICT_NAME
+    v = read_verdict(verdict_path) if verdict_path.is_file() else None
+    if v is None or not is_current("montecarlo", v.name, v.key, v.samples, v.file) or \
+            v.samples != len(mc.samples):
+        raise SpecError(f"{verdict_path}: no current verdict of {len(mc.samples)} samples; "
+                        f"fly it first: python -m pipeline montecarlo {args.file}"
+                        + (f" --samples {args.samples}" if args.samples else ""))
+    if v.shown:
+        print(f"fixes {mc.name}: its verdict shows the target as flown: nothing to fix")
+        return 0
+    flown = []
+    for fix in fix_changes(mc, current_searches(mc, out / mc.name)):
+        path = write_fix_file(mc, fix, out / mc.name / "fixes")
+        montecarlo_command(argparse.Namespace(**{**vars(args), "file": str(path),
+                                                 "sample": None}))
+        f = read_verdict(out / path.stem / VERDICT_NAME)
+        worst = f.worst[0] if f.worst else None
+        flown.append(FlownFix(
+            slug=fix.slug, words=fix.words, montecarlo=f.name, file=str(path),
+            samples=f.samples, passes=f.passes, lower_bound=f.lower_bound, shown=f.shown,
+            statement=f.statement,
+            worst_gain_margin_db=None if worst is None else worst.gain_margin_db,
+            worst_mode="" if worst is None else worst.worst_mode,
+            steps_per_s=fix.steps_per_s, delay_held=f.requirement.loop))
+    result = summarise(mc.name, flown)
+    write_fixes(out / mc.name / FIXES_NAME, result)
+    for f in flown:
+        print(f"fix {f.words}: {f.statement}; worst gain margin {f.worst_gain_margin_db:.3g} "
+              f"dB ({f.worst_mode}); {f.steps_per_s:.4g} steps per second")
+    print(f"fixes {mc.name}: {result.statement} -> {out / mc.name / FIXES_NAME}")
+    return 0

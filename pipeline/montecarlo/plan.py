@@ -62,6 +62,11 @@ class MonteCarloFile(BaseModel):
     samples: Annotated[int, Field(gt=0)] | None = None
     ripple_max: Annotated[float, Field(gt=0, allow_inf_nan=False)]
     dispersions: dict[str, Dispersion]
+    # The step (s) in which the command's arrival within the step and its jitter
+    # (mission.plant.timing, as set or drawn) are counted: a transport latency, held in seconds
+    # when a fix or a search changes the step (eq. 41), the whole-step delay held in steps (a
+    # computation delay of one period). None: all of it in steps of the step flown.
+    latency_step: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
 
 
 @dataclass(frozen=True)
@@ -215,9 +220,30 @@ def draw_sample(mc_name: str, config: MonteCarloFile, fixed: Spec, index: int,
     name = f"{mc_name}__{index:05d}"
     try:
         spec = with_overrides(base, _nested_inertial(overrides), name)
+        spec = _latency_held(spec, config.latency_step)
     except SpecError as exc:
         raise SpecError(f"{path}: sample {index}: {exc}") from None
     return Sample(index, name, seed, draws, spec)
+
+
+def _latency_held(spec: Spec, latency_step: float | None) -> Spec:
+    """The sample's arrival and jitter (eq. 41), counted in steps of ``latency_step``, in steps
+    of the step it flies: the same seconds (a transport latency). Unchanged at that step."""
+    timing, dt = spec.mission.plant.timing, spec.mission.dt
+    if latency_step is None or timing is None or dt == latency_step:
+        return spec
+    scale = latency_step / dt
+    fraction, jitter = timing.delay_fraction * scale, timing.jitter * scale
+    if fraction >= 1.0 or fraction + jitter > 1.0:
+        ms = 1e3 * latency_step
+        raise SpecError(
+            f"field latency_step: the arrival {timing.delay_fraction:g} + jitter "
+            f"{timing.jitter:g} steps of {latency_step:g} s ({timing.delay_fraction * ms:.4g} + "
+            f"{timing.jitter * ms:.4g} ms) reach past a step of {dt:g} s, a whole step later, "
+            "which the plant's hold does not model (the arrival stays within the step); fly a "
+            f"step of at least {(timing.delay_fraction + timing.jitter) * latency_step:.4g} s")
+    return with_overrides(spec, {"mission.plant.timing": {
+        "delay_fraction": fraction, "jitter": jitter, "seed": timing.seed}}, spec.name)
 
 
 def _nested_inertial(overrides: dict[str, Any]) -> dict[str, Any]:
@@ -271,9 +297,32 @@ def draw_one(ref: str | Path, index: int) -> tuple[MonteCarlo, Sample]:
     return mc, mc.samples[0]
 
 
+def derive(mc: MonteCarlo, changes: dict[str, Any], name: str,
+           indices: list[int] | None = None, seed: int | None = None) -> MonteCarlo:
+    """The Monte Carlo ``mc`` with ``changes`` added to its fixed overrides (``set``), named
+    ``name``, its samples ``indices`` (all of ``mc``'s by default) drawn again: on common random
+    numbers, sample i draws what ``mc``'s sample i drew (the same seed, index and streams), now
+    about the changed nominal; with ``seed``, fresh draws instead. Nothing runs."""
+    config = mc.config.model_copy(update={
+        "set": {**mc.config.set, **changes},
+        **({"seed": seed} if seed is not None else {})})
+    return _plan_config(mc.path, config, name,
+                        [s.index for s in mc.samples] if indices is None else indices)
+
+
 def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
     path = resolve_montecarlo(ref)
     config = read_montecarlo(path)
+    n = samples or file_samples(config)
+    check_samples(n, f"{path}: field {'samples' if config.samples else 'target'}"
+                  if samples is None else f"--samples {samples}")
+    return _plan_config(path, config, path.stem, list(range(n)) if only is None else [only])
+
+
+def _plan_config(path: Path, config: MonteCarloFile, name: str,
+                 indices: list[int]) -> MonteCarlo:
+    """Draw samples ``indices`` of the Monte Carlo ``config`` (read from ``path``) under
+    ``name``."""
     base = load_spec(config.mission, path.resolve().parent)
     if not config.dispersions:
         raise SpecError(f"{path}: field dispersions: empty; a Monte Carlo disperses something")
@@ -283,11 +332,6 @@ def _plan(ref: str | Path, samples: int | None, only: int | None) -> MonteCarlo:
         raise SpecError(f"{path}: field dispersions.{bad[0]}: a body's key is "
                         "body.<bus|payload>.<mass|com|inertia>")
     nominals = body_nominals(base, bodies, path)
-    n = samples or file_samples(config)
-    check_samples(n, f"{path}: field {'samples' if config.samples else 'target'}"
-                  if samples is None else f"--samples {samples}")
-    name = path.stem
-    indices = range(n) if only is None else [only]
     # The nominals are the fixed overrides' (a block the file sets, as mission.plant.timing,
     # can then be dispersed).
     fixed = nominal_spec(base, config)

@@ -92,8 +92,9 @@ class MonteCarloVerdict:
     wall_s: float
     key: str = ""  # what it is made from (pipeline.montecarlo.studies.study_key); "": unknown
     file: str = ""  # the Monte Carlo file it flew (absolute), to check the key against
-    loop: str = ""  # the nominal's loop (loop_key): a run of that loop is what it judges; "":
-    # unknown (a verdict written before the key), a study of no run's loop
+    # The nominal's loop (loop_key): a run of that loop is what it judges; "": unknown (a
+    # verdict written before the key), a study of no run's loop.
+    nominal_loop: str = ""
 
 
 def loop_key(spec: dict) -> str:
@@ -222,7 +223,7 @@ def judge(df: pd.DataFrame, name: str, config, base, dispersions: dict[str, str]
         mean_square_radius_max=(float(ms.max()) if len(ms := df["mean_square_radius"].dropna())
                                 else None),
         dispersions=dispersions, worst=worst_samples(df), simulated=int(df["ran"].sum()),
-        wall_s=wall_s, loop=loop_key(nominal_spec(base, config).model_dump(mode="json")))
+        wall_s=wall_s, nominal_loop=loop_key(nominal_spec(base, config).model_dump(mode="json")))
 
 
 def verdict_json(v: MonteCarloVerdict) -> str:

@@ -207,7 +207,7 @@ def across_dispersions(spec: dict, studies: list[MonteCarloVerdict]) -> tuple[bo
     target with no more failing, or the gain margin its worst sample misses), or that none
     flies this loop and how many samples, none failing, would show the default target."""
     key = loop_key(spec) if spec else ""
-    mine = sorted((v for v in studies if key and v.loop == key),
+    mine = sorted((v for v in studies if key and v.nominal_loop == key),
                   key=lambda v: (v.shown is True, v.samples), reverse=True)
     if not mine:
         t = Target()
