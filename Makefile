@@ -41,9 +41,11 @@ all: $(STAMP)
 # (hours of CPU on a laptop; STUDY_WORKERS, or a cluster: python -m pipeline studies --help),
 # one after another with progress, each one's kept records reused and a current one not flown
 # again; then the claims and reports as `make all`, which read them from then on. Without
-# them `make all` defers the claims that need them (DEFERRED: not PASS, not FAIL).
+# them `make all` defers the claims that need them (DEFERRED: not PASS, not FAIL). For each
+# Monte Carlo that does not show its target, then the least change of each knob every sample
+# meets (python -m pipeline search) and each fix flown through the same samples (fixes).
 STUDY_WORKERS ?= 2
-## studies: the Monte Carlos and power studies at full N, then the claims and reports that read them
+## studies: the Monte Carlos and power studies at full N, the fix searches and fixes of those not shown, then the claims and reports
 studies: $(STAMP)
 	@$(PY) -m pipeline studies --claims claims --out $(REPORTS) --workers $(STUDY_WORKERS)
 

@@ -272,7 +272,51 @@ def _cmd_studies(a: argparse.Namespace) -> int:
         if rc:
             raise RunFailed(f"studies: {kind} {path.name} failed (exit {rc}); run `make studies` "
                             "again to finish it (its kept records are reused)")
+    _fix_studies(a, cf, out, logs)
     return _cmd_all(a, compiled=True)
+
+
+def _fix_studies(a: argparse.Namespace, cf, out: Path, logs: Path) -> None:
+    """For each Monte Carlo whose current verdict does not show its target, the least change
+    of each knob every sample meets (``search``) and each fix flown through the same samples
+    (``fixes``), their kept records reused (issue 52)."""
+    from pipeline.claims.register import montecarlo_path, needed_montecarlos
+    from pipeline.montecarlo.plan import file_samples, read_montecarlo, result_key
+    from pipeline.montecarlo.search import FIX_KNOBS, current_searches
+    from pipeline.montecarlo.studies import study_result
+    from pipeline.progress import say, stage
+
+    dask = ["--workers", str(a.workers), *(["--scheduler", a.scheduler] if a.scheduler else []),
+            *(["--slurm"] if a.slurm else []),
+            *(["--worker-timeout", str(a.worker_timeout)] if a.worker_timeout else [])]
+    for alias in needed_montecarlos(cf, "montecarlo"):
+        ref = cf.montecarlo[alias]
+        path = montecarlo_path(cf, ref)
+        st = study_result("montecarlo", path, ref.samples, out)
+        if st.result is None or st.result["shown"] is not False:
+            continue
+        n = ref.samples or file_samples(read_montecarlo(path))
+        folder = out / "montecarlo" / st.name
+        done = {s["knob"] for s in current_searches(folder, result_key(path, n))}
+        where = ["--logs", str(logs / "montecarlo"), "--out", str(out / "montecarlo"),
+                 *(["--samples", str(ref.samples)] if ref.samples else [])]
+        for knob in FIX_KNOBS:
+            if knob in done:
+                say(f"search {st.name} {knob}: up to date -> {folder}/search-{knob}.json")
+                continue
+            with stage("search", f"{alias}: the least {knob} every one of its {n} samples "
+                       "meets (eq. 43)"):
+                rc = subprocess.call([sys.executable, "-m", "pipeline", "search", str(path),
+                                      "--knob", knob, *where, *dask])
+            if rc:
+                raise RunFailed(f"studies: search {path.name} {knob} failed (exit {rc}); run "
+                                "`make studies` again (its kept records are reused)")
+        with stage("fixes", f"{alias}: each fix flown through its {n} samples"):
+            rc = subprocess.call([sys.executable, "-m", "pipeline", "fixes", str(path), *where,
+                                  *dask])
+        if rc:
+            raise RunFailed(f"studies: fixes {path.name} failed (exit {rc}); run `make "
+                            "studies` again (its kept records are reused)")
 
 
 def _cmd_sweep(a: argparse.Namespace) -> int:

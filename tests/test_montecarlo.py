@@ -375,20 +375,21 @@ def test_the_least_step_and_its_fixes_fly_on_the_same_draws(tmp_path):
     from pipeline.montecarlo.sealed import unseal
 
     path = _write(tmp_path, HOT, "hot")
-    args = ("--logs", tmp_path / "l", "--out", tmp_path / "o")
+    out = tmp_path / "rep" / "montecarlo"  # a report folder's Monte Carlos
+    args = ("--logs", tmp_path / "l", "--out", out)
     assert run_cli("montecarlo", path, *args, timeout=300).returncode == 0
-    v = read_verdict(tmp_path / "o" / "hot" / "verdict.json")
+    v = read_verdict(out / "hot" / "verdict.json")
     assert v.failures == 2 and not v.shown
     r = run_cli("search", path, "--knob", "mission.dt", *args, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "mission.dt = 0.0025: 10 samples, 2 failing" in r.stderr  # the kept records
-    s = unseal((tmp_path / "o" / "hot" / "search-mission.dt.json").read_text())
+    s = unseal((out / "hot" / "search-mission.dt.json").read_text())
     chosen, set_by = s["search"]["chosen"], s["search"]["set_by"]
     assert 0.0015 < chosen < 0.0025 and s["search"]["violations"] == []
     assert set_by == v.worst[0].index  # the least margin sets the least step
     r = run_cli("fixes", path, *args, timeout=300)
     assert r.returncode == 0, r.stderr
-    fixes = {f.slug: f for f in read_fixes(tmp_path / "o" / "hot" / "fixes.json").fixes}
+    fixes = {f.slug: f for f in read_fixes(out / "hot" / "fixes.json").fixes}
     assert set(fixes) == {"imex", "dt"}
     assert fixes["dt"].passes == fixes["dt"].samples == 10
     assert fixes["dt"].worst_gain_margin_db == pytest.approx(6.0, abs=0.05)
@@ -397,3 +398,12 @@ def test_the_least_step_and_its_fixes_fly_on_the_same_draws(tmp_path):
     alone = run_cli("montecarlo", fixes["dt"].file, "--sample", str(set_by), "--logs",
                     tmp_path / "l", timeout=300)
     assert alone.returncode == 0 and "the same bits" in alone.stdout, alone.stderr
+    # The Monte Carlo's page: no fix shows the target at ten samples, each fix's row, the
+    # search's statement and its figure.
+    assert run_cli("report", "--out", tmp_path / "rep", timeout=300).returncode == 0
+    page = (out / "hot" / "montecarlo.md").read_text()
+    assert "**Recommended change:** none: no fix flown through these samples shows" in page
+    assert "## Each fix through the same samples" in page
+    assert "[the implicit damping (imex) at the same step](../hot+imex/montecarlo.md)" in page
+    assert f"mission.dt ≤ {chosen:.6g} (nominal 0.0025" in page
+    assert (tmp_path / "rep" / "figures" / "mc_hot_search-mission.dt.png").is_file()

@@ -342,23 +342,6 @@ def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
     return 0
 
 
-def current_searches(mc: MonteCarlo, folder: Path) -> list[dict]:
-    """The search results beside a Monte Carlo's verdict made from its file as it is now, by
-    this code (``search-<knob>.json``; a damaged or stale one is not read)."""
-    from pipeline.montecarlo.sealed import unseal
-
-    key = result_key(mc.path, len(mc.samples))
-    out = []
-    for path in sorted(folder.glob("search-*.json")):
-        try:
-            data = unseal(path.read_text())
-        except (OSError, ValueError):
-            continue
-        if data.get("key") == f"{key}, knob {data.get('knob')}":
-            out.append(data)
-    return out
-
-
 def fixes_command(args: argparse.Namespace) -> int:
     """``python -m pipeline fixes FILE``: each fix of the Monte Carlo's loop flown through its
     samples (:mod:`pipeline.montecarlo.fixes`), after the Monte Carlo and its searches."""
@@ -371,6 +354,7 @@ def fixes_command(args: argparse.Namespace) -> int:
         write_fix_file,
         write_fixes,
     )
+    from pipeline.montecarlo.search import current_searches
     from pipeline.montecarlo.studies import is_current
     from pipeline.montecarlo.verdict import VERDICT_NAME, read_verdict
 
@@ -387,7 +371,8 @@ def fixes_command(args: argparse.Namespace) -> int:
         print(f"fixes {mc.name}: its verdict shows the target as flown: nothing to fix")
         return 0
     flown = []
-    for fix in fix_changes(mc, current_searches(mc, out / mc.name)):
+    searches = current_searches(out / mc.name, result_key(mc.path, len(mc.samples)))
+    for fix in fix_changes(mc, searches):
         path = write_fix_file(mc, fix, out / mc.name / "fixes")
         montecarlo_command(argparse.Namespace(**{**vars(args), "file": str(path),
                                                  "sample": None}))

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -38,6 +39,8 @@ KNOBS = {"mission.dt": "the control step (s)",
          "controller.gains.bus.D": "the bus attitude's damping gain",
          "controller.gains.cam_pos.D": "the camera position's damping gain",
          "controller.gains.cam_ori.D": "the camera orientation's damping gain"}
+# The knobs `make studies` searches for a Monte Carlo that does not show its target.
+FIX_KNOBS = ("mission.dt", "controller.gains.bus.D", "controller.gains.cam_ori.D")
 CHECK_FRACTION = 0.1  # of the samples, flown again at the chosen value
 RTOL = 1e-3  # the bisection's relative width
 FLOOR = 1e-3  # the search gives up below this fraction of the nominal value
@@ -239,3 +242,20 @@ def statement(r: LeastChange, p: float, confidence: float) -> tuple[bool, str, s
                    f"{100 * (1 - p):.3g} % of the cases is at most {beta:.4f}: p ≥ {p:g} at "
                    f"{100 * confidence:g} % confidence "
                    + ("shown" if shown else "NOT shown")), cost
+
+
+def current_searches(folder: Path, montecarlo_key: str) -> list[dict]:
+    """The search results in ``folder`` (``search-<knob>.json``, as read) made for the Monte
+    Carlo whose result key is ``montecarlo_key`` (its file as it is now, this code); a damaged
+    or stale one is not read."""
+    from pipeline.montecarlo.sealed import unseal
+
+    out = []
+    for path in sorted(Path(folder).glob("search-*.json")):
+        try:
+            data = unseal(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if data.get("key") == f"{montecarlo_key}, knob {data.get('knob')}":
+            out.append({**data, "path": str(path)})
+    return out

@@ -145,3 +145,43 @@ def detector_power(result: Path, path: Path) -> str | None:
            title="ω_b period-2 amplitude as measured\n(ripple mission, median)")
     _save(fig, path)
     return None
+
+
+def least_change(result: Path, path: Path) -> str | None:
+    """A search's samples (eq. 43): the fraction of them failing at each value of the knob,
+    bounded below by those flown failing at or below it and above by those not yet shown to
+    meet it there, with the nominal value, the least change every sample meets and the
+    fraction the target allows (1 − p)."""
+    from pipeline.montecarlo.sealed import unseal
+
+    data = unseal(Path(result).read_text())
+    r = data["search"]
+    n = r["samples"]
+    passes = np.array([np.nan if b["passes_at"] is None else b["passes_at"]
+                       for b in r["brackets"]])
+    fails = np.array([np.nan if b["fails_at"] is None else b["fails_at"] for b in r["brackets"]])
+    values = np.unique(np.concatenate([passes[np.isfinite(passes)], fails[np.isfinite(fails)]]))
+    if values.size == 0:
+        return f"{result}: no sample flown"
+    lo = np.array([np.sum(fails <= x) for x in values]) / n  # flown failing at or below x
+    hi = np.array([np.sum(~(passes >= x)) for x in values]) / n  # not shown to meet x
+    fig, ax = plt.subplots(figsize=(7.5, 3.8), layout="constrained")
+    ax.step(values, hi, where="post", color=FAIL, lw=1.2,
+            label="at most (samples not flown meeting it there)")
+    ax.step(values, lo, where="post", color="k", lw=1.2,
+            label="at least (samples flown failing there)")
+    ax.axvline(r["nominal"], color="0.5", ls=":", lw=1.0, label=f"nominal {r['nominal']:.4g}")
+    if r["chosen"] is not None:
+        ax.axvline(r["chosen"], color=PASS, ls="--", lw=1.2,
+                   label=f"least change every sample meets, {r['chosen']:.4g}")
+    ax.axhline(1 - data["target_p"], color="tab:orange", ls="-.", lw=1.0,
+               label=f"what the target allows to fail, 1 − p = {1 - data['target_p']:.4g}")
+    ax.set(xlabel=f"{data['knob']} ({data['knob_words']})",
+           ylabel=f"fraction of samples failing ({DIMLESS})",
+           title=label(f"Least change, {data['montecarlo']}: {n} samples, {r['flights']} "
+                       "flights"))
+    ax.set_yscale("symlog", linthresh=1e-3)  # linear through 0, the target's 1 − p visible
+    ax.set_ylim(0.0, 1.0)
+    ax.legend(loc="center left", fontsize=8)
+    _save(fig, path)
+    return None

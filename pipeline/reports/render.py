@@ -221,7 +221,14 @@ def _montecarlo_figures(table: Path) -> list[tuple[fg.Figure, Callable]]:
     from pipeline.reports import montecarlo_figures as mf
 
     name = table.parent.name
+    searches = [(fg.Figure(
+        f"figures/mc_{name}_{r.stem}.png", f"Least change of {r.stem[7:]}, Monte Carlo {name}",
+        "The fraction of the samples that fail at each value of the knob, between the samples "
+        "flown failing at or below it and those not yet flown meeting it there, with the "
+        "least change every sample meets (eq. 43) and the fraction the target allows."),
+        partial(mf.least_change, r)) for r in sorted(table.parent.glob("search-*.json"))]
     return [
+        *searches,
         (fg.Figure(f"figures/mc_{name}_ecdf.png", f"Least gain margin, Monte Carlo {name}",
                    "The empirical distribution of each sample's least gain margin over its "
                    "damping modes (eq. 35), with the requirement: the fraction left of the "
@@ -273,6 +280,7 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
                for f, _ in _montecarlo_figures(table) if f.file in drawn]
         ctx = {"v": v, "figures": own, "table": rel(table),
                "verdict_file": rel(table.parent / "verdict.json"),
+               "searches": _searches(table.parent, v), "fixes": _fixes(table.parent, out),
                "code_version": report_version()}
         folder = table.parent
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
@@ -281,6 +289,48 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
                         "current": is_current("montecarlo", v.name, v.key, v.samples,
                                               v.file)})
     return written, entries
+
+
+def _searches(folder: Path, v) -> list[dict]:
+    """The current search results beside a Monte Carlo's verdict (``search-<knob>.json``)."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.plan import result_key
+    from pipeline.montecarlo.search import current_searches
+
+    try:
+        key = result_key(v.file, v.samples)
+    except SpecError:  # its file is gone: nothing can be current
+        return []
+    return [{**d, "file": rel(Path(d["path"]))} for d in current_searches(folder, key)]
+
+
+def _fixes(folder: Path, out: Path) -> dict | None:
+    """The fixes flown through a Monte Carlo's samples (``fixes.json``), each with whether
+    its own verdict is current and its page; None when none were flown."""
+    from pipeline.montecarlo.fixes import FIXES_NAME, read_fixes
+    from pipeline.montecarlo.studies import is_current
+    from pipeline.montecarlo.verdict import read_verdict
+
+    path = folder / FIXES_NAME
+    if not path.is_file():
+        return None
+    try:
+        result = read_fixes(path)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    rows = []
+    for f in result.fixes:
+        verdict = Path(out) / "montecarlo" / f.montecarlo / "verdict.json"
+        try:
+            fv = read_verdict(verdict)
+            current = is_current("montecarlo", fv.name, fv.key, fv.samples, fv.file)
+        except LogError:
+            current = False
+        rows.append({"f": f, "current": current,
+                     "page": f"../{f.montecarlo}/montecarlo.html"})
+    best = next((r for r in rows if r["f"].slug == result.recommended and r["current"]), None)
+    return {"rows": rows, "recommended": best, "statement": result.statement,
+            "file": rel(path)}
 
 
 def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:

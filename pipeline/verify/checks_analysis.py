@@ -308,6 +308,46 @@ def _joint_excess() -> Outcome:
                    max(diffs) + flags, 0.0, f"{flags} flags differ")
 
 
+@check("43", "the least change of a knob on 400 synthetic samples of known critical values "
+       "vs their minimum (43a); the bound (1 − ε)^N vs the violation probability of the "
+       "minimum of N uniform critical values counted over 20,000 trials (43b); the prediction "
+       "vs the step at which eq. 35's gain margin of the loop gain k·μ with one step of delay "
+       "is the required 6 dB (43c)",
+       "pipeline.montecarlo.search.least_change", "pipeline.montecarlo.search.LeastChange.risk",
+       "pipeline.montecarlo.search.predicted")
+def _least_change() -> Outcome:
+    from pipeline.montecarlo.search import RTOL, LeastChange, least_change, predicted
+    from pipeline.montecarlo.search import Outcome as Flown
+    from pipeline.sim.margins import gain_margin
+
+    g = rng(43)
+    critical = g.uniform(0.5, 3.0, 400)
+
+    def fly(value, which):
+        return {i: Flown(bool(value <= critical[i]),
+                         6.0 + 20 * math.log10(critical[i] / value)) for i in which}
+
+    found = least_change(1.0, list(range(400)), 6.0, fly)
+    # (43a): within the bisection's width below the least critical value, else its miss
+    miss = max(0.0, found.chosen - critical.min(), critical.min() * (1 - RTOL) - found.chosen)
+    # (43b): the minimum of N uniform critical values fails a fraction V = k* of the cases
+    n, eps, trials = 20, 0.1, 20_000
+    k_star = g.uniform(0.0, 1.0, (trials, n)).min(axis=1)
+    counted = float(np.mean(k_star > eps))
+    bound = LeastChange("k", 1.0, None, n, 0, None, [], [], []).risk(1 - eps)
+    se = math.sqrt(bound * (1 - bound) / trials)
+    # (43c): the gain margin at the predicted step, one step of delay, μ = 40 1/s
+    mu, k0 = 40.0, 0.0025
+    gm0 = 20 * math.log10(gain_margin(k0 * mu, 1)[0])
+    at = 20 * math.log10(gain_margin(predicted(k0, gm0, 6.0) * mu, 1)[0])
+    return Outcome(f"400 critical values uniform on [0.5, 3], nominal 1; N = {n}, ε = {eps}, "
+                   f"{trials} trials; μ = {mu} 1/s at dt {k0} s",
+                   max(miss, abs(counted - bound) - 4 * se, abs(at - 6.0)), 1e-9,
+                   f"{found.flights} flights for 400 samples; P(V > ε) counted {counted:.4f} "
+                   f"against (1 − ε)^N = {bound:.4f} (4 standard errors {4 * se:.4f} allowed); "
+                   f"the predicted step's margin {at:.12f} dB")
+
+
 # This module's checks, in the order the cross-check shows them: an explicit list, read by
 # :func:`pipeline.verify.suite.all_checks` (no registration by import).
 CHECKS = (
@@ -324,4 +364,5 @@ CHECKS = (
     _dispersed_inertia,
     _sensors,
     _joint_excess,
+    _least_change,
 )
