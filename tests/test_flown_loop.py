@@ -386,6 +386,12 @@ def test_nothing_is_called_a_fix_that_misses_the_requirement(delayed, tmp_path):
     assert (f"it would take {samples_to_show(92, 0.9973, 0.9)} samples with no more than 92 "
             "failing, or 1.5 dB more gain margin on its worst sample (7: 4.5 dB against "
             "6 dB)") in d.fix
+    # Two studies of the loop under different dispersions: the one that does not show it
+    # speaks (C42 shows dt 2.5 ms with a whole step of delay, C44 not under latency).
+    (d,) = decisions(runs, [_verdict("study", fix_loop, 852, 0, 9.0),
+                            _verdict("c44", fix_loop, 852, 16, 5.2)])
+    assert d.fix.startswith("Candidate fix") and "c44 does not show it" in d.fix
+    assert "(shown by study, under other dispersions)" in d.fix
     (d,) = decisions(runs, [_verdict("few", fix_loop, 32, 0, 9.0)])
     assert d.fix.startswith("Candidate fix")
     assert "820 more samples, none of them failing, would show it" in d.fix

@@ -95,3 +95,27 @@ def test_the_prediction_is_the_critical_value_of_a_proportional_loop_gain():
         gm = 20 * math.log10(g_c / (g * k))
         k_req = g_c / g / 10 ** (REQUIRED_DB / 20)
         assert predicted(k, gm, REQUIRED_DB) == pytest.approx(k_req, rel=1e-12)
+
+
+def test_a_failure_the_margin_does_not_see_steps_down_by_a_fifth():
+    """A sample failing on another part of the requirement (its gain margin 20 dB, above the
+    required 6) until the knob is below 0.3 of its nominal: stepped down a fifth at a time,
+    not a bisection's width (a few flights, not thousands)."""
+    def fly(value, which):
+        return {i: Outcome(bool(i != 0 or value <= 0.3), 20.0) for i in which}
+
+    r = least_change(1.0, list(range(10)), REQUIRED_DB, fly)
+    assert r.chosen is not None and 0.3 * (1 - RTOL) <= r.chosen <= 0.3
+    assert r.flights < 10 + 25
+
+
+def test_the_search_goes_no_lower_than_every_sample_can_fly():
+    """Each sample's least value (a step its latency fits in): the search stops at the
+    largest, which every sample can fly, and says so when a sample needs less."""
+    critical = np.array([2.0, 0.5, 2.0, 2.0])
+    floors = {0: 0.1, 1: 0.1, 2: 0.7, 3: 0.2}
+    asked: list[tuple[float, int]] = []
+    r = least_change(1.0, [0, 1, 2, 3], REQUIRED_DB, oracle(critical, asked),
+                     floor=floors.__getitem__)
+    assert r.chosen is None and min(v for v, _ in asked) >= 0.7
+    assert "the least every sample can be flown at" in r.violations[0]

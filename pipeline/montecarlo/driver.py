@@ -229,10 +229,15 @@ def search_command(args: argparse.Namespace) -> int:
     from pipeline.montecarlo.plan import derive, nominal_spec
     from pipeline.montecarlo.search import KNOBS
 
-    mc = plan_montecarlo(args.file, args.samples)
     if args.knob not in KNOBS:
         raise SpecError(f"--knob {args.knob}: not a knob the search moves (one of "
                         f"{', '.join(KNOBS)})")
+    mc = plan_montecarlo(args.file, args.samples)
+    drawn = mc.config.dispersions.get(args.knob)
+    if drawn is not None and drawn.rel is None:
+        # Each sample's draw would replace the knob's value: every value flies the same.
+        raise SpecError(f"{mc.path}: field dispersions.{args.knob}: the search moves this knob's "
+                        "nominal, which a draw of its own (not relative to it) overrides")
     value = nominal_spec(mc.base, mc.config).model_dump(mode="json")
     for part in args.knob.split("."):
         value = value[part]
@@ -266,6 +271,7 @@ def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
         Outcome,
         SearchResult,
         least_change,
+        search_key,
         statement,
     )
     from pipeline.montecarlo.verdict import judge, make_table
@@ -330,7 +336,7 @@ def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
         required_gain_margin_db=mc.base.requirements.gain_margin_db, target_p=p,
         confidence=c, risk=found.risk(p), certified=certified, statement=words, cost=cost,
         verification=verification, search=found, wall_s=time.perf_counter() - t0,
-        key=f"{result_key(mc.path, len(mc.samples))}, knob {knob}",
+        key=search_key(result_key(mc.path, len(mc.samples)), knob),
         file=str(Path(mc.path).resolve()))
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"search-{knob}.json"
@@ -348,15 +354,18 @@ def fixes_command(args: argparse.Namespace) -> int:
     from pipeline.errors import SpecError
     from pipeline.montecarlo.fixes import (
         FIXES_NAME,
-        FlownFix,
+        FixesResult,
+        FixRecord,
         fix_changes,
-        summarise,
+        judged,
+        recommend,
         write_fix_file,
         write_fixes,
     )
     from pipeline.montecarlo.search import current_searches
     from pipeline.montecarlo.studies import is_current
     from pipeline.montecarlo.verdict import VERDICT_NAME, read_verdict
+    from pipeline.provenance.keys import file_digest
 
     mc = plan_montecarlo(args.file, args.samples)
     out = Path(args.out).resolve()
@@ -370,25 +379,23 @@ def fixes_command(args: argparse.Namespace) -> int:
     if v.shown:
         print(f"fixes {mc.name}: its verdict shows the target as flown: nothing to fix")
         return 0
-    flown = []
-    searches = current_searches(out / mc.name, result_key(mc.path, len(mc.samples)))
-    for fix in fix_changes(mc, searches):
+    key = result_key(mc.path, len(mc.samples))
+    records, flown = [], []
+    for fix in fix_changes(mc, current_searches(out / mc.name, key)):
         path = write_fix_file(mc, fix, out / mc.name / "fixes")
         montecarlo_command(argparse.Namespace(**{**vars(args), "file": str(path),
                                                  "sample": None}))
-        f = read_verdict(out / path.stem / VERDICT_NAME)
-        worst = f.worst[0] if f.worst else None
-        flown.append(FlownFix(
-            slug=fix.slug, words=fix.words, montecarlo=f.name, file=str(path),
-            samples=f.samples, passes=f.passes, lower_bound=f.lower_bound, shown=f.shown,
-            statement=f.statement,
-            worst_gain_margin_db=None if worst is None else worst.gain_margin_db,
-            worst_mode="" if worst is None else worst.worst_mode,
-            steps_per_s=fix.steps_per_s, delay_held=f.requirement.loop))
-    result = summarise(mc.name, flown)
-    write_fixes(out / mc.name / FIXES_NAME, result)
+        record = FixRecord(fix, path.stem, str(path), file_digest(path))
+        records.append(record)
+        flown.append(judged(record, read_verdict(out / path.stem / VERDICT_NAME)))
+    write_fixes(out / mc.name / FIXES_NAME, FixesResult(mc.name, key, records))
     for f in flown:
-        print(f"fix {f.words}: {f.statement}; worst gain margin {f.worst_gain_margin_db:.3g} "
-              f"dB ({f.worst_mode}); {f.steps_per_s:.4g} steps per second")
-    print(f"fixes {mc.name}: {result.statement} -> {out / mc.name / FIXES_NAME}")
+        gm = ("none" if f.worst_gain_margin_db is None else
+              f"{f.worst_gain_margin_db:.3g} dB ({f.worst_mode})")
+        print(f"fix {f.words}: {'shown' if f.shown else 'NOT shown'}: {f.statement}; worst "
+              f"sample's least gain margin {gm}; {f.steps_per_s:.4g} control steps per second")
+    best = recommend(flown)
+    print(f"fixes {mc.name}: " + (f"recommended: {best.words}" if best else
+                                  "no fix flown shows the target across the dispersions")
+          + f" -> {out / mc.name / FIXES_NAME}")
     return 0

@@ -11,13 +11,14 @@ is flown, judged and kept like any Monte Carlo: its verdict under ``<out>/<monte
 each of its samples re-runnable alone (``--sample I``). A change of step holds the delay as the
 file says (``latency_step``: the arrival and jitter in seconds, the whole steps in steps).
 
-``fixes.json`` beside the Monte Carlo's verdict lists each fix with its verdict, its worst
-sample's margin and its cost, and the one recommended: the cheapest whose verdict shows the
-target.
+``fixes.json`` beside the Monte Carlo's verdict lists the fixes flown (the Monte Carlo's key
+then, each fix's file and its digest); the reports judge each from its own current verdict
+(:func:`judged`) and recommend the cheapest shown (:func:`recommend`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -36,16 +37,35 @@ class FixChange:
     changes: dict  # the overrides it adds to the Monte Carlo's ``set``
     words: str
     steps_per_s: float  # its cost: control steps per second of mission
+    # A search's least change: chosen from these very samples, so their pass count at it is
+    # no independent test (eq. 38 does not apply): the search's certificate (eq. 43) is.
+    search_certified: bool | None = None  # None: chosen beforehand (imex)
+    search_statement: str = ""
+
+
+@dataclass(frozen=True)
+class FixRecord:
+    """What ``fixes.json`` keeps of a fix flown: the change, its Monte Carlo and file (with
+    the file's digest, to tell a file written again since), and how it was chosen."""
+
+    change: FixChange
+    montecarlo: str  # the fix's own Monte Carlo (its page and verdict)
+    file: str
+    file_digest: str
+
+
+@dataclass(frozen=True)
+class FixesResult:
+    montecarlo: str
+    key: str  # the Monte Carlo's result key when its fixes were flown
+    fixes: list[FixRecord]
 
 
 @dataclass(frozen=True)
 class FlownFix:
-    """A fix flown through the Monte Carlo's samples, as its verdict judged it (eq. 38)."""
+    """A fix as its own current verdict judges it (eq. 38; eq. 43 for a search's change)."""
 
-    slug: str
-    words: str
-    montecarlo: str  # the fix's own Monte Carlo (its page and verdict)
-    file: str
+    record: FixRecord
     samples: int
     passes: int
     lower_bound: float | None
@@ -53,16 +73,42 @@ class FlownFix:
     statement: str
     worst_gain_margin_db: float | None
     worst_mode: str
-    steps_per_s: float
     delay_held: str
 
+    @property
+    def words(self) -> str:
+        return self.record.change.words
 
-@dataclass(frozen=True)
-class FixesResult:
-    montecarlo: str
-    fixes: list[FlownFix]
-    recommended: str  # the slug of the cheapest fix shown, "" when none is
-    statement: str
+    @property
+    def steps_per_s(self) -> float:
+        return self.record.change.steps_per_s
+
+
+def judged(record: FixRecord, v) -> FlownFix:
+    """The fix ``record`` as its verdict ``v`` (a ``MonteCarloVerdict``) shows it. A change
+    chosen beforehand (imex) is shown by its verdict (eq. 38). A search's least change was
+    chosen from these samples: it is shown only by the search's certificate (eq. 43), and only
+    if every sample meets it as flown."""
+    c = record.change
+    worst = v.worst[0] if v.worst else None
+    if c.search_certified is None:
+        shown, statement = v.shown, v.statement
+    else:
+        shown = (None if v.shown is None else
+                 bool(c.search_certified) and v.passes == v.samples)
+        statement = (f"{v.passes} of {v.samples} samples meet it as flown; chosen from these "
+                     f"samples, it rests on the search: {c.search_statement}")
+    return FlownFix(record, v.samples, v.passes, v.lower_bound, shown, statement,
+                    None if worst is None else worst.gain_margin_db,
+                    "" if worst is None else worst.worst_mode, v.requirement.loop)
+
+
+def recommend(flown: list[FlownFix]) -> FlownFix | None:
+    """The cheapest fix shown (fewest control steps per second, then the larger margin of its
+    worst sample), or None."""
+    shown = [f for f in flown if f.shown]
+    return min(shown, key=lambda f: (f.steps_per_s, -(f.worst_gain_margin_db or -math.inf)),
+               default=None)
 
 
 def fix_changes(mc: MonteCarlo, searches: list[dict]) -> list[FixChange]:
@@ -87,7 +133,9 @@ def fix_changes(mc: MonteCarlo, searches: list[dict]) -> list[FixChange]:
         slug = "dt" if knob == "mission.dt" else knob.removeprefix("controller.gains.").replace(
             ".", "_")
         out.append(FixChange(slug, {knob: value}, f"{knob} {r['nominal']:g} → {value:.6g}",
-                             1.0 / (value if knob == "mission.dt" else dt)))
+                             1.0 / (value if knob == "mission.dt" else dt),
+                             bool(s["certified"]), "; ".join(
+                                 x for x in (s["statement"], s["verification"]) if x)))
     return out
 
 
@@ -108,20 +156,13 @@ def write_fix_file(mc: MonteCarlo, fix: FixChange, folder: Path) -> Path:
     return path
 
 
-def summarise(mc_name: str, flown: list[FlownFix]) -> FixesResult:
-    shown = sorted((f for f in flown if f.shown), key=lambda f: f.steps_per_s)
-    best = shown[0] if shown else None
-    statement = (f"recommended: {best.words} ({best.montecarlo}): {best.statement}; cost "
-                 f"{best.steps_per_s:.4g} control steps per second" if best else
-                 "no fix flown shows the target across the dispersions")
-    return FixesResult(mc_name, flown, best.slug if best else "", statement)
-
-
 def write_fixes(path: Path, result: FixesResult) -> None:
     atomic_write_text(path, sealed_json(asdict(result), indent=1))
 
 
 def read_fixes(path: Path) -> FixesResult:
+    """``fixes.json`` (ValueError, KeyError or TypeError if it is damaged or altered)."""
     d = unseal(Path(path).read_text())
-    return FixesResult(d["montecarlo"], [FlownFix(**f) for f in d["fixes"]], d["recommended"],
-                       d["statement"])
+    return FixesResult(d["montecarlo"], d["key"], [
+        FixRecord(FixChange(**f["change"]), f["montecarlo"], f["file"], f["file_digest"])
+        for f in d["fixes"]])

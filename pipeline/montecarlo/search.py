@@ -109,10 +109,11 @@ def least_change(nominal: float, indices: list[int], required_db: float, fly: Fl
     """k* = min_i k_i over the samples ``indices`` (see the module docstring): ``fly(value,
     samples)`` flies those samples at that value of the knob and says how each did; the
     samples the monotonicity check flies again are drawn from a generator seeded ``seed``.
-    ``floor(i)``: the least value sample i can be flown at (a step its latency fits in;
-    default a thousandth of the nominal)."""
-    def least(i: int) -> float:
-        return max(FLOOR * nominal, floor(i) if floor is not None else 0.0)
+    ``floor(i)``: the least value sample i can be flown at (a step its latency fits in); the
+    search goes no lower than the largest of them, which every sample can fly, nor below a
+    thousandth of the nominal."""
+    lowest = max([FLOOR * nominal, *(floor(i) for i in indices)] if floor is not None
+                 else [FLOOR * nominal])
 
     passes_at: dict[int, float] = {}
     fails_at: dict[int, float] = {}
@@ -148,19 +149,20 @@ def least_change(nominal: float, indices: list[int], required_db: float, fly: Fl
         hi = fails_at[i]
 
         def below(v: float, i: int = i) -> float:
-            # Just below the prediction from the margin at v, at most a fifth below v, and no
-            # lower than the sample can fly.
-            guess = min(predicted(v, last_margin[i], required_db), v) * (1.0 - 2.0 * rtol)
-            return max(guess, 0.8 * v, least(i))
+            # Just below the prediction from the margin at v, at most a fifth below v; a
+            # fifth below where the margin predicts nothing lower (the sample fails on
+            # another part of the requirement); never below what every sample can fly.
+            guess = predicted(v, last_margin[i], required_db) * (1.0 - 2.0 * rtol)
+            return max(guess if guess < v * (1.0 - 2.0 * rtol) else 0.8 * v, 0.8 * v, lowest)
 
         value = below(hi)
         while True:  # a value that sample i meets, stepping down from the prediction
             if flown(value, [i])[i].passes:
                 break
-            if value <= least(i):
+            if value <= lowest:
                 return result(None, i, [*bisected, i], [], [
                     f"sample {i} meets the requirement at no value down to {value:.6g}, the "
-                    "least it can be flown at"])
+                    "least every sample can be flown at"])
             hi, value = value, below(value)
         lo = value
         probe = lo * (1.0 + 4.0 * rtol)  # the prediction is often that close: bracket it
@@ -216,9 +218,9 @@ def statement(r: LeastChange, p: float, confidence: float) -> tuple[bool, str, s
     n, knob = r.samples, r.knob
     flights = f"{r.flights} flights for {n} samples ({r.flights / n:.3g} N)"
     if r.chosen is None:
-        return False, (f"no value of {knob} down to {FLOOR:g} of its nominal {r.nominal:g} "
-                       f"meets the requirement for every sample ({'; '.join(r.violations)}): "
-                       f"no change of this knob alone is a fix; {flights}"), ""
+        return False, (f"no value of {knob} below its nominal {r.nominal:g} meets the "
+                       f"requirement for every sample ({'; '.join(r.violations)}): no change "
+                       f"of this knob alone is a fix; {flights}"), ""
     cost = (f"{1.0 / r.chosen:.4g} control steps per second against {1.0 / r.nominal:.4g}"
             if knob == "mission.dt" else
             f"the gain {r.chosen / r.nominal:.3g} of its nominal: a slower damping mode")
@@ -228,20 +230,40 @@ def statement(r: LeastChange, p: float, confidence: float) -> tuple[bool, str, s
             f"{r.nominal:g}: nothing to change; {flights}"), cost
     beta = r.risk(p)
     less = 100 * (1 - r.chosen / r.nominal)
+    if not r.monotone:
+        return False, (f"{knob} ≤ {r.chosen:.6g} (nominal {r.nominal:g}, {less:.3g} % less) is "
+                       f"the least value the search found, set by sample {r.set_by}; {flights};"
+                       f" pass/fail is NOT monotone in {knob} on the samples "
+                       f"({'; '.join(r.violations)}): not every sample is shown to meet it, "
+                       "and the scenario bound (eq. 43b) is not claimed"), cost
     found = (f"{knob} ≤ {r.chosen:.6g} (nominal {r.nominal:g}, {less:.3g} % less) is the "
              f"least change every one of the {n} samples meets, set by sample "
              f"{r.set_by}; {flights}")
-    if not r.monotone:
-        return False, (f"{found}; pass/fail is NOT monotone in {knob} on the samples "
-                       f"({'; '.join(r.violations)}): the scenario bound (eq. 43b) is not "
-                       "claimed"), cost
     shown = beta <= 1.0 - confidence
-    return shown, (f"{found}; pass/fail monotone in {knob} on every sample flown "
+    return shown, (f"{found}; no sample flown contradicts pass/fail monotone in {knob} "
                    f"({len(r.checked)} met above it flown again at it); by the scenario "
                    f"approach (eq. 43b) the probability that it fails more than "
                    f"{100 * (1 - p):.3g} % of the cases is at most {beta:.4f}: p ≥ {p:g} at "
                    f"{100 * confidence:g} % confidence "
                    + ("shown" if shown else "NOT shown")), cost
+
+
+def search_version() -> str:
+    """The search's own code (this module and the Monte Carlo's plan, which draws the samples
+    at each value), for a result's key: a search made by other code is not current."""
+    import hashlib
+
+    from pipeline.montecarlo import plan
+
+    h = hashlib.sha256()
+    for module in (__file__, plan.__file__):
+        h.update(Path(module).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def search_key(montecarlo_key: str, knob: str) -> str:
+    """A search result's key: its Monte Carlo's result key, the knob and the search's code."""
+    return f"{montecarlo_key}, knob {knob}, search {search_version()}"
 
 
 def current_searches(folder: Path, montecarlo_key: str) -> list[dict]:
@@ -256,6 +278,6 @@ def current_searches(folder: Path, montecarlo_key: str) -> list[dict]:
             data = unseal(path.read_text())
         except (OSError, ValueError):
             continue
-        if data.get("key") == f"{montecarlo_key}, knob {data.get('knob')}":
+        if data.get("key") == search_key(montecarlo_key, str(data.get("knob"))):
             out.append({**data, "path": str(path)})
     return out

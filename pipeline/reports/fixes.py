@@ -207,8 +207,11 @@ def across_dispersions(spec: dict, studies: list[MonteCarloVerdict]) -> tuple[bo
     target with no more failing, or the gain margin its worst sample misses), or that none
     flies this loop and how many samples, none failing, would show the default target."""
     key = loop_key(spec) if spec else ""
+    # A study that does not show it speaks first: two studies of one nominal loop may disperse
+    # it differently (a whole step of delay, a latency within the step), and the loop must
+    # hold under each.
     mine = sorted((v for v in studies if key and v.nominal_loop == key),
-                  key=lambda v: (v.shown is True, v.samples), reverse=True)
+                  key=lambda v: (v.shown is not True, v.failures, v.samples), reverse=True)
     if not mine:
         t = Target()
         return False, (f"no current Monte Carlo flies this loop across the dispersions: "
@@ -216,7 +219,8 @@ def across_dispersions(spec: dict, studies: list[MonteCarloVerdict]) -> tuple[bo
                        f"show p ≥ {t.p:g} at {100 * t.confidence:g} % confidence (eq. 38b)")
     v = mine[0]
     if v.shown is True:
-        return True, f"shown across the dispersions by {v.name}: {v.statement}"
+        return True, ("shown across the dispersions by "
+                      + "; by ".join(f"{x.name}: {x.statement}" for x in mine))
     if v.shown is None:
         return False, f"{v.name}, a Monte Carlo of this loop, has no verdict: {v.statement}"
     more = samples_to_show(v.failures, v.target_p, v.confidence)
@@ -228,7 +232,10 @@ def across_dispersions(spec: dict, studies: list[MonteCarloVerdict]) -> tuple[bo
     if worst is not None and short > 0:
         lack += (f", or {short:.3g} dB more gain margin on its worst sample ({worst.index}: "
                  f"{worst.gain_margin_db:.3g} dB against {v.requirement.gain_margin_db:g} dB)")
-    return False, f"across the dispersions {v.name} does not show it: {v.statement}; {lack}"
+    shown_by = [x.name for x in mine if x.shown is True]
+    return False, (f"across the dispersions {v.name} does not show it: {v.statement}; {lack}"
+                   + (f" (shown by {', '.join(shown_by)}, under other dispersions)"
+                      if shown_by else ""))
 
 
 def decisions(runs: list[RunData], studies: list[MonteCarloVerdict] = ()) -> list[Decision]:
@@ -265,9 +272,11 @@ def decisions(runs: list[RunData], studies: list[MonteCarloVerdict] = ()) -> lis
                    + range_mark(bad.run, rec.joint_ranges))
         fixes = sorted(t.fixes, key=lambda r: (r.steps_per_s, -r.gain_margin_db))
         if fixes:
-            f = fixes[0]
+            # The cheapest a study shows, else the cheapest, a candidate.
+            judged = [(f, *across_dispersions(by_name[f.run].spec, list(studies)))
+                      for f in fixes]
+            f, shown, study = next((j for j in judged if j[1]), judged[0])
             not_fix = [r for r in t.rows if r.verdict != FIX and not r.rings]
-            shown, study = across_dispersions(by_name[f.run].spec, list(studies))
             fix = (("Fix: " if shown else "Candidate fix, not the fix until a study shows it: ")
                    + f"{f.run}, {_change(by_name[bad.run], by_name[f.run])}: every mode "
                    f"meets {t.requirement} on its nominal flight (least {f.least}: "

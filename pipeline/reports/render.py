@@ -226,7 +226,7 @@ def _montecarlo_figures(table: Path) -> list[tuple[fg.Figure, Callable]]:
         "The fraction of the samples that fail at each value of the knob, between the samples "
         "flown failing at or below it and those not yet flown meeting it there, with the "
         "least change every sample meets (eq. 43) and the fraction the target allows."),
-        partial(mf.least_change, r)) for r in sorted(table.parent.glob("search-*.json"))]
+        partial(mf.least_change, r)) for r in _current_search_files(table)]
     return [
         *searches,
         (fg.Figure(f"figures/mc_{name}_ecdf.png", f"Least gain margin, Monte Carlo {name}",
@@ -280,7 +280,7 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
                for f, _ in _montecarlo_figures(table) if f.file in drawn]
         ctx = {"v": v, "figures": own, "table": rel(table),
                "verdict_file": rel(table.parent / "verdict.json"),
-               "searches": _searches(table.parent, v), "fixes": _fixes(table.parent, out),
+               "searches": _searches(table.parent, v), "fixes": _fixes(table.parent, out, v),
                "code_version": report_version()}
         folder = table.parent
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
@@ -289,6 +289,18 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
                         "current": is_current("montecarlo", v.name, v.key, v.samples,
                                               v.file)})
     return written, entries
+
+
+def _current_search_files(table: Path) -> list[Path]:
+    """The current search results beside a Monte Carlo's table (none if its verdict is
+    damaged)."""
+    from pipeline.montecarlo.verdict import read_verdict
+
+    try:
+        v = read_verdict(table.parent / "verdict.json")
+    except LogError:
+        return []
+    return [Path(d["path"]) for d in _searches(table.parent, v)]
 
 
 def _searches(folder: Path, v) -> list[dict]:
@@ -304,33 +316,39 @@ def _searches(folder: Path, v) -> list[dict]:
     return [{**d, "file": rel(Path(d["path"]))} for d in current_searches(folder, key)]
 
 
-def _fixes(folder: Path, out: Path) -> dict | None:
-    """The fixes flown through a Monte Carlo's samples (``fixes.json``), each with whether
-    its own verdict is current and its page; None when none were flown."""
-    from pipeline.montecarlo.fixes import FIXES_NAME, read_fixes
+def _fixes(folder: Path, out: Path, v) -> dict | None:
+    """The fixes flown through a Monte Carlo's samples (``fixes.json``), each judged from its
+    own verdict as it is now (not current: made from other inputs or code, or its file written
+    again since), the recommendation the cheapest current one shown; ``stale`` when the Monte
+    Carlo itself has changed since they were flown. None when none were flown."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.fixes import FIXES_NAME, judged, read_fixes, recommend
+    from pipeline.montecarlo.plan import result_key
     from pipeline.montecarlo.studies import is_current
     from pipeline.montecarlo.verdict import read_verdict
+    from pipeline.provenance.keys import file_digest
 
     path = folder / FIXES_NAME
     if not path.is_file():
         return None
     try:
         result = read_fixes(path)
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+        stale = result.key != result_key(v.file, v.samples)
+    except (OSError, ValueError, KeyError, TypeError, SpecError):
+        return {"rows": [], "recommended": None, "stale": True, "file": rel(path)}
     rows = []
-    for f in result.fixes:
-        verdict = Path(out) / "montecarlo" / f.montecarlo / "verdict.json"
+    for r in result.fixes:
+        f = None
         try:
-            fv = read_verdict(verdict)
-            current = is_current("montecarlo", fv.name, fv.key, fv.samples, fv.file)
-        except LogError:
-            current = False
-        rows.append({"f": f, "current": current,
-                     "page": f"../{f.montecarlo}/montecarlo.html"})
-    best = next((r for r in rows if r["f"].slug == result.recommended and r["current"]), None)
-    return {"rows": rows, "recommended": best, "statement": result.statement,
-            "file": rel(path)}
+            fv = read_verdict(Path(out) / "montecarlo" / r.montecarlo / "verdict.json")
+            if (is_current("montecarlo", fv.name, fv.key, fv.samples, fv.file)
+                    and file_digest(Path(r.file)) == r.file_digest):
+                f = judged(r, fv)
+        except (LogError, OSError):
+            pass
+        rows.append({"r": r.change, "f": f, "page": f"../{r.montecarlo}/montecarlo.html"})
+    best = None if stale else recommend([row["f"] for row in rows if row["f"] is not None])
+    return {"rows": rows, "recommended": best, "stale": stale, "file": rel(path)}
 
 
 def render_power(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:

@@ -166,7 +166,8 @@ def report_inputs(out: Path) -> list[Path]:
     out = Path(out)
     patterns = (f"*/{ANALYSIS_FILE}", f"*/{DIRECTIONS_FILE}", CLAIMS_FILE, "bench.json",
                 "baselines.json", "sweeps/*/sweep.parquet", "montecarlo/*/montecarlo.parquet",
-                "montecarlo/*/verdict.json", "power/*/power.json",
+                "montecarlo/*/verdict.json", "montecarlo/*/search-*.json",
+                "montecarlo/*/fixes.json", "power/*/power.json",
                 f"{IMPORTED_FOLDER}/*/{ANALYSIS_FILE}", f"{IMPORTED_FOLDER}/*/{DIRECTIONS_FILE}")
     return sorted(p for pat in patterns for p in out.glob(pat))
 
