@@ -97,8 +97,10 @@ def summary_text(v: MonteCarloVerdict, table: Path) -> str:
     if v.fails_by_part:
         lines.append("  failing: " + ", ".join(f"{k} {n}" for k, n in
                                                sorted(v.fails_by_part.items())))
+    from pipeline.montecarlo.verdict import file_ref
+
     lines.append("  worst samples (re-run one alone: python -m pipeline montecarlo "
-                 f"{v.name} --sample I):")
+                 f"{file_ref(v)} --sample I):")
     for w in v.worst[:5]:
         draws = ", ".join(f"{k} {int(x) if k.endswith('.seed') else f'{x:.4g}'}"
                           for k, x in w.draws.items() if not k.endswith(".redraws"))

@@ -97,6 +97,19 @@ class MonteCarloVerdict:
     nominal_loop: str = ""
 
 
+def file_ref(v: MonteCarloVerdict) -> str:
+    """How a command names the Monte Carlo file a verdict flew: its name where that is the
+    shipped file (``specs/montecarlo/<name>.yaml``), else its path (a fix's file)."""
+    from pipeline.errors import SpecError
+    from pipeline.montecarlo.plan import resolve_montecarlo
+
+    try:
+        shipped = resolve_montecarlo(v.name).resolve() == Path(v.file).resolve()
+    except SpecError:
+        shipped = False
+    return v.name if shipped or not v.file else v.file
+
+
 def loop_key(spec: dict) -> str:
     """Which loop a resolved spec (``Spec.model_dump(mode="json")``) flies, as a digest: its
     robot, controller, step, plant (delay, arrival and jitter, sensors) and requirement. A run

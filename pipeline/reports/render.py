@@ -270,7 +270,7 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
     """One page per Monte Carlo (``montecarlo/<name>/montecarlo.{md,html}``), and the index's
     entries (its verdict and its page)."""
     from pipeline.montecarlo.studies import is_current
-    from pipeline.montecarlo.verdict import read_verdict
+    from pipeline.montecarlo.verdict import file_ref, read_verdict
 
     drawn = {f.file for f in figs}
     written, entries = [], []
@@ -281,6 +281,7 @@ def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], lis
         ctx = {"v": v, "figures": own, "table": rel(table),
                "verdict_file": rel(table.parent / "verdict.json"),
                "searches": _searches(table.parent, v), "fixes": _fixes(table.parent, out, v),
+               "ref": file_ref(v),
                "code_version": report_version()}
         folder = table.parent
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
