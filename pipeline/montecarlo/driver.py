@@ -112,23 +112,13 @@ def summary_text(v: MonteCarloVerdict, table: Path) -> str:
     return "\n".join(lines)
 
 
-def montecarlo_command(args: argparse.Namespace) -> int:
-    if args.sample is not None:
-        return run_one(args)
-    mc = plan_montecarlo(args.file, args.samples)
-    from pipeline.montecarlo.owner import check_start, claim_folders
-    from pipeline.montecarlo.task import cached_record
-    from pipeline.montecarlo.verdict import (
-        TABLE_NAME,
-        VERDICT_NAME,
-        judge,
-        make_table,
-        verdict_json,
-    )
-    from pipeline.provenance.keys import sample_version
-    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
-    from pipeline.sweep.driver import _raise_stop, _Stop, check_writable
-    from pipeline.sweep.results import write_table
+def _prepare(args: argparse.Namespace, mc: MonteCarlo):
+    """(the records' folder, the results' folder, the cluster's options) of a command that
+    flies ``mc``'s samples, both folders checked writable and owned (before the cluster
+    starts: a refusal touches nothing)."""
+    from pipeline.montecarlo.owner import check_start
+    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions
+    from pipeline.sweep.driver import check_writable
 
     root = Path(args.logs).resolve() / mc.name
     out = Path(args.out).resolve() / mc.name
@@ -140,6 +130,28 @@ def montecarlo_command(args: argparse.Namespace) -> int:
         worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
     check_start("montecarlo", mc.name, mc.path, (root, out), options, mc.seconds,
                 [s.spec.name for s in mc.samples], args.force)
+    return root, out, options
+
+
+def montecarlo_command(args: argparse.Namespace) -> int:
+    if args.sample is not None:
+        return run_one(args)
+    mc = plan_montecarlo(args.file, args.samples)
+    from pipeline.montecarlo.owner import claim_folders
+    from pipeline.montecarlo.task import cached_record
+    from pipeline.montecarlo.verdict import (
+        TABLE_NAME,
+        VERDICT_NAME,
+        judge,
+        make_table,
+        verdict_json,
+    )
+    from pipeline.provenance.keys import sample_version
+    from pipeline.sweep.cluster import open_client
+    from pipeline.sweep.driver import _raise_stop, _Stop
+    from pipeline.sweep.results import write_table
+
+    root, out, options = _prepare(args, mc)
     t0 = time.perf_counter()
     previous = {s: signal.signal(s, _raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -265,7 +277,7 @@ def _least_step(mc: MonteCarlo, knob: str):
 
 
 def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
-    from pipeline.montecarlo.owner import check_start, claim_folders
+    from pipeline.montecarlo.owner import claim_folders
     from pipeline.montecarlo.plan import derive
     from pipeline.montecarlo.sealed import sealed_json
     from pipeline.montecarlo.search import (
@@ -277,21 +289,11 @@ def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
         statement,
     )
     from pipeline.montecarlo.verdict import judge, make_table
-    from pipeline.sweep.cluster import WORKER_TIMEOUT, ClusterOptions, open_client
-    from pipeline.sweep.driver import check_writable
+    from pipeline.sweep.cluster import open_client
 
     knob = args.knob
-    root = Path(args.logs).resolve() / mc.name
+    root, out, options = _prepare(args, mc)
     searched = root / f"search-{knob}"
-    out = Path(args.out).resolve() / mc.name
-    for folder in (root, out):
-        check_writable(folder)
-    options = ClusterOptions(
-        scheduler=args.scheduler, workers=args.workers, slurm=args.slurm,
-        slurm_log_dir=root.parent / ".slurm",
-        worker_timeout=args.worker_timeout or WORKER_TIMEOUT, lifetime=args.lifetime)
-    check_start("montecarlo", mc.name, mc.path, (root, out), options, mc.seconds,
-                [s.spec.name for s in mc.samples], args.force)
     by_index = {s.index: s for s in mc.samples}
     t0 = time.perf_counter()
     with open_client(options) as session:
