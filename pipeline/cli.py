@@ -281,7 +281,7 @@ def _fix_studies(a: argparse.Namespace, cf, out: Path, logs: Path) -> None:
     of each knob every sample meets (``search``) and each fix flown through the same samples
     (``fixes``), their kept records reused (issue 52)."""
     from pipeline.claims.register import montecarlo_path, needed_montecarlos
-    from pipeline.montecarlo.plan import file_samples, read_montecarlo, result_key
+    from pipeline.montecarlo.plan import result_key
     from pipeline.montecarlo.search import FIX_KNOBS, current_searches
     from pipeline.montecarlo.studies import study_result
     from pipeline.progress import say, stage
@@ -295,7 +295,7 @@ def _fix_studies(a: argparse.Namespace, cf, out: Path, logs: Path) -> None:
         st = study_result("montecarlo", path, ref.samples, out)
         if st.result is None or st.result["shown"] is not False:
             continue
-        n = ref.samples or file_samples(read_montecarlo(path))
+        n = st.ran  # the N of its current result: the register's, else the file's
         folder = out / "montecarlo" / st.name
         done = {s["knob"] for s in current_searches(folder, result_key(path, n))}
         where = ["--logs", str(logs / "montecarlo"), "--out", str(out / "montecarlo"),

@@ -7,7 +7,7 @@ import argparse
 import signal
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -234,13 +234,12 @@ def run_one(args: argparse.Namespace) -> int:
     return 0
 
 
-
 def search_command(args: argparse.Namespace) -> int:
     """``python -m pipeline search FILE --knob KNOB``: the least change of the knob that every
     sample of the Monte Carlo meets, on its own draws (eq. 43), written to
     ``<out>/<montecarlo>/search-<knob>.json``."""
     from pipeline.errors import SpecError
-    from pipeline.montecarlo.plan import derive, nominal_spec
+    from pipeline.montecarlo.plan import nominal_spec, nominal_value
     from pipeline.montecarlo.search import KNOBS
 
     if args.knob not in KNOBS:
@@ -252,11 +251,8 @@ def search_command(args: argparse.Namespace) -> int:
         # Each sample's draw would replace the knob's value: every value flies the same.
         raise SpecError(f"{mc.path}: field dispersions.{args.knob}: the search moves this knob's "
                         "nominal, which a draw of its own (not relative to it) overrides")
-    value = nominal_spec(mc.base, mc.config).model_dump(mode="json")
-    for part in args.knob.split("."):
-        value = value[part]
-    nominal = float(value)
-    derive(mc, {args.knob: nominal}, mc.name, [0])  # the knob's field as the spec has it
+    nominal = float(nominal_value(nominal_spec(mc.base, mc.config), args.knob,
+                                  f"--knob {args.knob}"))
     return _search(args, mc, nominal)
 
 
@@ -344,8 +340,6 @@ def _search(args: argparse.Namespace, mc: MonteCarlo, nominal: float) -> int:
         file=str(Path(mc.path).resolve()))
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"search-{knob}.json"
-    from dataclasses import asdict
-
     atomic_write_text(target, sealed_json(asdict(result), indent=1))
     print(f"search {mc.name} {knob}: {words}" + (f"; cost: {cost}" if cost else "")
           + (f"; {verification}" if verification else "") + f" -> {target}")

@@ -25,7 +25,7 @@ from pathlib import Path
 import yaml
 
 from pipeline.atomic_files import atomic_write_text
-from pipeline.montecarlo.plan import MonteCarlo
+from pipeline.montecarlo.plan import MonteCarlo, nominal_spec
 from pipeline.montecarlo.sealed import sealed_json, unseal
 
 FIXES_NAME = "fixes.json"
@@ -115,8 +115,6 @@ def fix_changes(mc: MonteCarlo, searches: list[dict]) -> list[FixChange]:
     """The fixes to fly: imex where the loop integrates explicitly, and each search's least
     change, where it found one monotone on the samples or verified afresh (``searches``: their
     results as read, current ones only)."""
-    from pipeline.montecarlo.plan import nominal_spec
-
     nominal = nominal_spec(mc.base, mc.config)
     dt = nominal.mission.dt
     out = []

@@ -130,17 +130,17 @@ def _dig(data: dict, key: str) -> Any:
     return node
 
 
-def _nominal_value(base: Spec, key: str, path: Path) -> float | list[float]:
+def nominal_value(base: Spec, key: str, where: str) -> float | list[float]:
+    """The number (or list of numbers) at the dotted field ``key`` of ``base``; a SpecError
+    beginning with ``where`` (the file and field, or the option, that names it) otherwise."""
     try:
         value = _dig(base.model_dump(mode="json"), key)
     except KeyError as exc:
-        raise SpecError(f"{path}: field dispersions.{key}: the mission spec has no field "
-                        f"{exc.args[0]!r}") from None
+        raise SpecError(f"{where}: the mission spec has no field {exc.args[0]!r}") from None
     numeric = (isinstance(value, int | float) and not isinstance(value, bool)) or (
         isinstance(value, list) and value and all(isinstance(x, int | float) for x in value))
     if not numeric:
-        raise SpecError(f"{path}: field dispersions.{key}: not a number or a list of numbers "
-                        f"({value!r})")
+        raise SpecError(f"{where}: not a number or a list of numbers ({value!r})")
     return value
 
 
@@ -209,7 +209,7 @@ def draw_sample(mc_name: str, config: MonteCarloFile, fixed: Spec, index: int,
                 bodies[m.group(1)][m.group(2)] = value
                 draws |= _flat(key, value)
             else:
-                nominal = _nominal_value(base, key, path)
+                nominal = nominal_value(base, key, f"{path}: field dispersions.{key}")
                 value = draw_value(d, nominal, rng, key)
                 overrides[key] = _as_field(value, nominal)
                 draws |= _flat(key, value)

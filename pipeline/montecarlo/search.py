@@ -248,21 +248,10 @@ def statement(r: LeastChange, p: float, confidence: float) -> tuple[bool, str, s
                    + ("shown" if shown else "NOT shown")), cost
 
 
-def search_version() -> str:
-    """The search's own code (this module and the Monte Carlo's plan, which draws the samples
-    at each value), for a result's key: a search made by other code is not current."""
-    import hashlib
-
-    from pipeline.montecarlo import plan
-
-    h = hashlib.sha256()
-    for module in (__file__, plan.__file__):
-        h.update(Path(module).read_bytes())
-    return h.hexdigest()[:16]
-
-
 def search_key(montecarlo_key: str, knob: str) -> str:
     """A search result's key: its Monte Carlo's result key, the knob and the search's code."""
+    from pipeline.provenance.keys import search_version
+
     return f"{montecarlo_key}, knob {knob}, search {search_version()}"
 
 

@@ -140,15 +140,22 @@ def study_result(kind: Kind, file: Path, samples: int | None, out: Path) -> Stud
                        target)
 
 
-def is_current(kind: Kind, name: str, key: str, samples: int, file: str = "") -> bool:
-    """Whether a result found in a report folder (``<kind>/<name>/``) was made from the file
-    it names (``file``, else the shipped file of that name) as it is now, by this code (False
-    where neither is there: its inputs cannot be checked)."""
+def current_key(kind: Kind, name: str, samples: int, file: str = "") -> str | None:
+    """The key a result of ``samples`` made from the file ``file`` (else the shipped file
+    ``name``) as it is now, by this code, carries; None where neither is there or valid (its
+    inputs cannot be checked)."""
     from pipeline.errors import SpecError
     from pipeline.montecarlo.plan import resolve_montecarlo
 
     try:
         path = Path(file) if file and Path(file).is_file() else resolve_montecarlo(name)
-        return bool(key) and key == study_key(kind, path, samples)
+        return study_key(kind, path, samples)
     except SpecError:  # gone, or no longer a valid file
-        return False
+        return None
+
+
+def is_current(kind: Kind, name: str, key: str, samples: int, file: str = "") -> bool:
+    """Whether a result found in a report folder (``<kind>/<name>/``) was made from the file
+    it names (``file``, else the shipped file of that name) as it is now, by this code (False
+    where neither is there: its inputs cannot be checked)."""
+    return bool(key) and key == current_key(kind, name, samples, file)

@@ -27,6 +27,7 @@ ANALYSIS_ENTRY = ("pipeline.analysis.stages", "pipeline.analysis.record")
 REPORT_ENTRY = ("pipeline.reports.render",)
 IMPORT_ENTRY = ("pipeline.importer.run",)
 SAMPLE_ENTRY = ("pipeline.montecarlo.sample", "pipeline.sim.run")
+SEARCH_ENTRY = ("pipeline.montecarlo.search", "pipeline.montecarlo.plan")
 IMPORT_LIBRARIES = ("numpy", "scipy", "pinocchio", "numba", "pyarrow", "pandas", "rosbags")
 TEMPLATES = PACKAGE_DIR / "reports" / "templates"
 
@@ -116,6 +117,13 @@ def sample_version() -> str:
     """The key of a Monte Carlo sample's record: the simulator's, the analysis stages' and the
     sample's own sources, and the numerical libraries."""
     return _digest(source_closure(SAMPLE_ENTRY), library_versions(ANALYSIS_LIBRARIES))
+
+
+@cache
+def search_version() -> str:
+    """The key of a least-change search's code: the search and the Monte Carlo's plan, which
+    draws the samples at each value of the knob (the samples' own code is in their key)."""
+    return _digest(source_closure(SEARCH_ENTRY), {})
 
 
 @cache

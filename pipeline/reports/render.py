@@ -269,62 +269,61 @@ def montecarlo_figure_jobs(out: Path) -> list[tuple[fg.Figure, Callable]]:
 def render_montecarlo(out: Path, figs: list[fg.Figure]) -> tuple[list[Path], list[dict]]:
     """One page per Monte Carlo (``montecarlo/<name>/montecarlo.{md,html}``), and the index's
     entries (its verdict and its page)."""
-    from pipeline.montecarlo.studies import is_current
+    from pipeline.montecarlo.studies import current_key
     from pipeline.montecarlo.verdict import file_ref, read_verdict
 
     drawn = {f.file for f in figs}
     written, entries = [], []
     for table in montecarlo_tables(out):
         v = read_verdict(table.parent / "verdict.json")
+        now = current_key("montecarlo", v.name, v.samples, v.file)  # its file as it is now
         own = [{"file": f"../../{f.file}", "title": f.title, "caption": f.caption}
                for f, _ in _montecarlo_figures(table) if f.file in drawn]
         ctx = {"v": v, "figures": own, "table": rel(table),
                "verdict_file": rel(table.parent / "verdict.json"),
-               "searches": _searches(table.parent, v), "fixes": _fixes(table.parent, out, v),
+               "searches": _searches(table.parent, now),
+               "fixes": _fixes(table.parent, out, now),
                "ref": file_ref(v),
                "code_version": report_version()}
         folder = table.parent
         written += [render("montecarlo.md.j2", folder / "montecarlo.md", **ctx),
                     render("montecarlo.html.j2", folder / "montecarlo.html", **ctx)]
         entries.append({"v": v, "page": folder.relative_to(out).as_posix() + "/montecarlo.html",
-                        "current": is_current("montecarlo", v.name, v.key, v.samples,
-                                              v.file)})
+                        "current": bool(v.key) and v.key == now})
     return written, entries
 
 
 def _current_search_files(table: Path) -> list[Path]:
     """The current search results beside a Monte Carlo's table (none if its verdict is
     damaged)."""
+    from pipeline.montecarlo.studies import current_key
     from pipeline.montecarlo.verdict import read_verdict
 
     try:
         v = read_verdict(table.parent / "verdict.json")
     except LogError:
         return []
-    return [Path(d["path"]) for d in _searches(table.parent, v)]
+    now = current_key("montecarlo", v.name, v.samples, v.file)
+    return [Path(d["path"]) for d in _searches(table.parent, now)]
 
 
-def _searches(folder: Path, v) -> list[dict]:
-    """The current search results beside a Monte Carlo's verdict (``search-<knob>.json``)."""
-    from pipeline.errors import SpecError
-    from pipeline.montecarlo.plan import result_key
+def _searches(folder: Path, now: str | None) -> list[dict]:
+    """The search results beside a Monte Carlo's verdict (``search-<knob>.json``) made for it
+    as it is now (``now``: its current result key; None, its file gone: none)."""
     from pipeline.montecarlo.search import current_searches
 
-    try:
-        key = result_key(v.file, v.samples)
-    except SpecError:  # its file is gone: nothing can be current
+    if now is None:
         return []
-    return [{**d, "file": rel(Path(d["path"]))} for d in current_searches(folder, key)]
+    return [{**d, "file": rel(Path(d["path"]))} for d in current_searches(folder, now)]
 
 
-def _fixes(folder: Path, out: Path, v) -> dict | None:
+def _fixes(folder: Path, out: Path, now: str | None) -> dict | None:
     """The fixes flown through a Monte Carlo's samples (``fixes.json``), each judged from its
     own verdict as it is now (not current: made from other inputs or code, or its file written
     again since), the recommendation the cheapest current one shown; ``stale`` when the Monte
-    Carlo itself has changed since they were flown. None when none were flown."""
-    from pipeline.errors import SpecError
+    Carlo itself has changed since they were flown (``now``: its current result key). None
+    when none were flown."""
     from pipeline.montecarlo.fixes import FIXES_NAME, judged, read_fixes, recommend
-    from pipeline.montecarlo.plan import result_key
     from pipeline.montecarlo.studies import is_current
     from pipeline.montecarlo.verdict import read_verdict
     from pipeline.provenance.keys import file_digest
@@ -334,8 +333,8 @@ def _fixes(folder: Path, out: Path, v) -> dict | None:
         return None
     try:
         result = read_fixes(path)
-        stale = result.key != result_key(v.file, v.samples)
-    except (OSError, ValueError, KeyError, TypeError, SpecError):
+        stale = now is None or result.key != now
+    except (OSError, ValueError, KeyError, TypeError):
         return {"rows": [], "recommended": None, "stale": True, "file": rel(path)}
     rows = []
     for r in result.fixes:
