@@ -110,19 +110,39 @@ def test_damping_rates_are_eigenvalues_of_minv_d(rng):
     assert np.allclose(mu, ref, rtol=1e-10)
 
 
-def test_bisection_matches_two_over_mu_when_stiffness_is_negligible(rng):
+def test_map_critical_step_matches_two_over_mu_when_stiffness_is_negligible(rng):
     A = rng.standard_normal((9, 9))
     M = A @ A.T + np.eye(9)
     D = np.diag(rng.uniform(1, 5, 9))
     J_x = np.eye(9)
     mu_max = theory.damping_rates(M, D)[-1]
     # Stiffness 1e-4 against damping O(1): its shift of the bound is O(k/d) ~ 1e-4.
-    dt_bis = theory.bisect_critical_step(M, D, 1e-4 * np.eye(9), J_x)
+    dt_bis = theory.map_critical_step(M, D, 1e-4 * np.eye(9), J_x)
     assert dt_bis == pytest.approx(2 / mu_max, rel=1e-3)
     # With real stiffness the bound moves; the map, not 2/μ_max, is then the truth.
-    dt_stiff = theory.bisect_critical_step(M, D, 50 * np.eye(9), J_x)
+    dt_stiff = theory.map_critical_step(M, D, 50 * np.eye(9), J_x)
     assert dt_stiff != pytest.approx(2 / mu_max, rel=1e-3)
-    assert theory.bisect_critical_step(M, D, np.eye(9), J_x, "imex") is None
+    assert theory.map_critical_step(M, D, np.eye(9), J_x, "imex") is None
+
+
+@pytest.mark.parametrize("plant,delay,fraction", [("reduced", 0, 0.0), ("sampled", 1, 0.0),
+                                                  ("sampled", 1, 0.4)])
+def test_map_critical_step_is_where_the_radius_crosses_one(rng, plant, delay, fraction):
+    # Independently of the search: NumPy's eigenvalues of the map just either side of the
+    # step returned, on random loops with real stiffness.
+    for _ in range(5):
+        A = rng.standard_normal((9, 9))
+        M = A @ A.T + np.eye(9)
+        D = np.diag(rng.uniform(1, 5, 9))
+        K_x = np.diag(rng.uniform(1, 80, 9))
+        J_x = np.eye(9) + 0.1 * rng.standard_normal((9, 9))
+        dt = theory.map_critical_step(M, D, K_x, J_x, plant=plant, delay=delay,
+                                      fraction=fraction)
+
+        radius = [float(np.max(np.abs(np.linalg.eig(theory.flown_map(
+            M, D, K_x, J_x, h, "explicit", plant, delay, fraction))[0])))
+            for h in (dt * (1 - 1e-8), dt * (1 + 1e-8))]
+        assert radius[0] < 1.0 <= radius[1]
 
 
 @pytest.mark.parametrize("overrides", [

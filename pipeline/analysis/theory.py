@@ -13,10 +13,10 @@ from pipeline.sim.rotations import skew
 from pipeline.sim.stability import (  # noqa: F401  (eqs. 22, 24, 41)
     UPDATE_ORDERS,
     MapSpectrum,
-    bisect_critical_step,
     critical_step,
     discrete_map,
     flown_map,
+    map_critical_step,
     mean_square_radius,
     posture_stiffness,
     spectrum,

@@ -412,9 +412,8 @@ def svd_right(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @jit
-def _reorthonormalise_rows(P: np.ndarray) -> None:
-    """One Newton–Schulz step towards the nearest matrix with orthonormal rows, in place:
-    P ← P + ½ (I − P Pᵀ) P, which takes rows orthonormal to δ to rows orthonormal to O(δ²)."""
+def _orthonormality_defect(P: np.ndarray) -> np.ndarray:
+    """E = I − P Pᵀ (symmetric, each entry from one :func:`dot`)."""
     n = P.shape[0]
     E = np.empty((n, n))
     for i in range(n):
@@ -422,22 +421,28 @@ def _reorthonormalise_rows(P: np.ndarray) -> None:
             e = (1.0 if i == j else 0.0) - dot(P[i], P[j])
             E[i, j] = e
             E[j, i] = e
+    return E
+
+
+@jit
+def _reorthonormalise_rows(P: np.ndarray, E: np.ndarray) -> None:
+    """One Newton–Schulz step towards the nearest matrix with orthonormal rows, in place:
+    P ← P + ½ (I − P Pᵀ) P, with E = I − P Pᵀ given, which takes rows orthonormal to δ to
+    rows orthonormal to O(δ²)."""
     C = matmul(E, P)
-    for i in range(n):
+    for i in range(P.shape[0]):
         for k in range(P.shape[1]):
             P[i, k] += 0.5 * C[i, k]
 
 
 @jit
-def _near_orthonormal(P: np.ndarray) -> bool:
-    """Whether ‖I − P Pᵀ‖_max < ½: the rows close enough to orthonormal for the Newton–Schulz
-    step to bring them closer (it converges for ‖I − P Pᵀ‖ < 1); a zero or arbitrary matrix
-    is not a start."""
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(i + 1):
-            if abs((1.0 if i == j else 0.0) - dot(P[i], P[j])) >= 0.5:
-                return False
+def _near_orthonormal(E: np.ndarray) -> bool:
+    """Whether ‖E‖_max < ½, E = I − P Pᵀ: P's rows close enough to orthonormal for the
+    Newton–Schulz step to bring them closer (it converges for ‖I − P Pᵀ‖ < 1); a zero or
+    arbitrary matrix is not a start."""
+    for e in E.ravel():
+        if abs(e) >= 0.5:
+            return False
     return True
 
 
@@ -461,9 +466,11 @@ def svd_right_from(A: np.ndarray, Vt_before: np.ndarray) -> tuple[np.ndarray, np
         Vt[:] = np.nan
         return s, Vt
     start = np.eye(n)
-    if Vt_before.shape[0] == n and _all_finite(Vt_before) and _near_orthonormal(Vt_before):
-        start = Vt_before.copy()
-        _reorthonormalise_rows(start)
+    if Vt_before.shape[0] == n and _all_finite(Vt_before):
+        E = _orthonormality_defect(Vt_before)
+        if _near_orthonormal(E):
+            start = Vt_before.copy()
+            _reorthonormalise_rows(start, E)
     B = matmul(start, np.ascontiguousarray(A.T))  # rows (A v_i)ᵀ: A V_start's columns
     _orthogonalise_rows(B, start)
     norms = _row_norms(B)

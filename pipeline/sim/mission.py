@@ -70,10 +70,10 @@ from pipeline.sim.robot_file import check_null_space, check_posture_limits
 from pipeline.sim.rotations import quat_from_matrix
 from pipeline.sim.sensors import Measurement
 from pipeline.sim.stability import (
-    bisect_critical_step,
     critical_step,
     damping_modes,
     loop_stiffness,
+    map_critical_step,
     position_jacobian,
 )
 from pipeline.sim.target import CoverageCounter, build_target
@@ -189,7 +189,7 @@ class Mission:
         mu_max = float(damping_rates(np.ascontiguousarray(M), D)[-1])
         integrator, plant = self.spec.controller.integrator, self.spec.mission.plant
         delay, fraction = Latency.of(plant).worst  # the longest delay flown (eq. 41)
-        return critical_step(mu_max), bisect_critical_step(
+        return critical_step(mu_max), map_critical_step(
             M, D, K_x, J_x, integrator, plant=plant.model, delay=delay, fraction=fraction)
 
     def guard_fix(self, s: LoopState) -> tuple[str, str]:
