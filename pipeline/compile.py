@@ -318,6 +318,7 @@ def _analysis() -> None:
 
     s = seed()
     gamma = s.robot.gamma_matrices(np.stack([s.q, s.q]))  # Γ rebuilt from logged q (eq. 5)
+    s.robot.j_oplus_conditioning(np.stack([s.q]))  # an import's J⊕ conditioning (eq. 19)
     batched_singular_values(gamma[np.array([True, False])])
     svd_right(gamma)
     _, Vt = svd_right_sequence(gamma[np.array([True, False])], np.empty((0, 0)))

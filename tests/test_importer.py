@@ -68,7 +68,7 @@ def _same_data_stages(imported: ImportedRecord, original) -> None:
 # -- round trips ------------------------------------------------------------------------------
 
 def test_the_own_log_cut_to_t_q_v_reimported_from_parquet_gives_the_same_numbers(
-        nominal, tmp_path):
+        nominal, short_logs, tmp_path):
     cols, original = nominal
     src = tmp_path / "cut.parquet"
     pq.write_table(pa.table({"t": cols["t"], "q": list(cols["q"]), "v": list(cols["v"])}), src)
@@ -78,6 +78,12 @@ def test_the_own_log_cut_to_t_q_v_reimported_from_parquet_gives_the_same_numbers
     assert isinstance(rec, ImportedRecord) and rec.origin.format == "parquet"
     _same_data_stages(rec, original)
     assert rec.damping is None and rec.prediction is None and rec.integrator == "undeclared"
+    # The damped J⊕'s conditioning rebuilt on import is the simulator's own at every row.
+    sigma = ["s_min_J", "kappa_J"]
+    rebuilt = verify_log(done.path).columns(sigma)
+    flown = verify_log(short_logs["short_nominal"]).columns(sigma)
+    for c in sigma:
+        assert np.array_equal(rebuilt[c], flown[c]), c
 
 
 def test_provenance_is_a_check_only_against_the_sources_own_sigma(nominal, short_logs,

@@ -285,9 +285,7 @@ def _sigmas(robot: GiordanoRobot, q: np.ndarray, rows: int = 4096) -> np.ndarray
         out[a:a + rows, 0] = S[:, -1]
         with np.errstate(divide="ignore", invalid="ignore"):
             out[a:a + rows, 1] = np.where(S[:, -1] > 0, S[:, 0] / S[:, -1], np.inf)
-    for k, qk in enumerate(q):
-        T = robot.terms(qk, np.zeros(robot.model.nv), dynamics=False)
-        out[k, 2:] = T.s_min_J, T.kappa_J
+        out[a:a + rows, 2:] = robot.j_oplus_conditioning(q[a:a + rows])
     return out
 
 

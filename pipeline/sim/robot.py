@@ -161,6 +161,15 @@ class GiordanoRobot:
         gamma_stack(self.bundle, q, self.mass, out)
         return out
 
+    def j_oplus_conditioning(self, q: np.ndarray) -> np.ndarray:
+        """(σ_min, κ) of the damped J⊕ for every row of q (N×13 → N×2, eqs. 6, 19): what a
+        run logs as ``s_min_J`` and ``kappa_J``, by the step's own kernels, in one compiled
+        loop (:meth:`terms` per row would also take Γ's SVD and a Python call a row)."""
+        q = np.array(q, dtype=float)  # a writable C copy: one compiled specialisation
+        out = np.empty((len(q), 2))
+        j_oplus_conditioning_stack(self.bundle, q, self.mass, self.floor, self.damping, out)
+        return out
+
     def dynamics_inputs(self, q: np.ndarray, v: np.ndarray) -> tt.DynamicsInputs:
         """The terms at (q, v) that eqs. 2–11 take, by name (R_tb, p_b, R_te, p_e, J_e, J̇_e,
         M, C, A_g, Ȧ_g), camera Jacobians in the LOCAL frame
@@ -201,3 +210,14 @@ def gamma_stack(bundle, q, mass, out):
     for k in range(q.shape[0]):
         R_tb, p_b, R_te, p_e, J_e, M = placement_terms(bundle, q[k])
         out[k] = tt.gamma_of_placements(R_tb, p_b, R_te, p_e, J_e, M, mass)
+
+
+@jit
+def j_oplus_conditioning_stack(bundle, q, mass, floor, damping, out):
+    """out[k] = (σ_min, κ) of the damped J⊕ at q[k] (eqs. 6, 19), as
+    :func:`~pipeline.sim.task_transform.task_transform` gives them to a step."""
+    for k in range(q.shape[0]):
+        R_tb, p_b, R_te, p_e, J_e, M = placement_terms(bundle, q[k])
+        t = tt.task_transform(R_tb, p_b, R_te, p_e, J_e, M, mass, floor, damping)
+        out[k, 0] = t[8]
+        out[k, 1] = t[9]
