@@ -28,8 +28,9 @@ loop        ``loop_update``, both loops of one step (eqs. 12–16, 21)       rhs
 row         the step kernel's readers and writers, γ (eq. 20), coverage   linalg
 step        ``controller_step`` and the compiled mission loop (eq. 22), as  all of the above
             a mission's first step calls them
-analysis    Γ's rebuild from a logged q and the batched SVDs               kinematics,
-                                                                           redundancy, terms
+analysis    Γ's rebuild from a logged q and the batched SVDs, an import's  kinematics,
+            J⊕ conditioning                                                redundancy, terms,
+                                                                           transform
 plant       the sampled-data plant: RK4 on the articulated-body algorithm  linalg
             (eq. 29)
 ==========  =============================================================  =================
@@ -381,7 +382,7 @@ UNITS = {u.name: u for u in (
     Unit("step", "the step kernel and the mission loop (eq. 22)",
          ("transform", "loop", "guidance", "row"), _step),
     Unit("analysis", "the analysis' rebuild of Γ and its SVDs",
-         ("kinematics", "redundancy", "terms"), _analysis),
+         ("kinematics", "redundancy", "terms", "transform"), _analysis),
     Unit("plant", "the sampled-data plant's RK4 and dynamics (eq. 29)", ("linalg",), _plant),
 )}
 

@@ -475,7 +475,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
     dt_bis = theory.map_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
-                                         delay=delay, fraction=fraction)
+                                      delay=delay, fraction=fraction)
     req = L.requirement
     fixes = mode_fixes(M_b, D, dt)
     record = rs.Theory(

@@ -414,8 +414,9 @@ class Mission:
         self._held = None  # a run starts with no command held (eq. 29)
         self._start_sensors()
         warned: list[str] = []
-        # The guard (eq. 24): the map's critical step at the start, once per run (a bisection
-        # on 18×18 eigenvalues, too costly per step), then dt·μ_max at every step (explicit).
+        # The guard (eq. 24): the map's critical step at the start, once per run (a search
+        # over 18×18 eigenvalue problems, too costly per step), then dt·μ_max at every step
+        # (explicit).
         dt_damping, dt_map = self.critical_steps(s0)
         integrator = self.spec.controller.integrator
         delay, fraction = Latency.of(self.spec.mission.plant).worst

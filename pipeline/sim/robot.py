@@ -162,7 +162,7 @@ class GiordanoRobot:
         return out
 
     def j_oplus_conditioning(self, q: np.ndarray) -> np.ndarray:
-        """(σ_min, κ) of the damped J⊕ for every row of q (N×13 → N×2, eqs. 6, 19): what a
+        """(σ_min, κ) of the damped J⊕ for every row of q (N×nq → N×2, eqs. 6, 19): what a
         run logs as ``s_min_J`` and ``kappa_J``, by the step's own kernels, in one compiled
         loop (:meth:`terms` per row would also take Γ's SVD and a Python call a row)."""
         q = np.array(q, dtype=float)  # a writable C copy: one compiled specialisation

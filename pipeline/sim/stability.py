@@ -214,7 +214,7 @@ def map_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
     dt = 0 it creeps up to 1 from below (Φ → I) and at dt = 1 it is in the hundreds, so the
     crossing is first bracketed within a factor of 2, searching from the damping-only bound
     2/μ_max (eq. 24, which it is near), then found by Brent's method (SciPy's ``brentq``) on
-    ρ − 1: about ten maps where a bisection of [lo, hi] to the same tolerance needs about
+    ρ − 1: about fifteen maps where a bisection of [lo, hi] to the same tolerance needs about
     forty. The guard pays it once per run, the analysis once per record.
     """
     from scipy.optimize import brentq

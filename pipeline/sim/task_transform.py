@@ -157,7 +157,7 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
     """
     nv = J_e.shape[1]
     n = nv - 6
-    work = np.empty(6 * 9 + 4 * 3 + 3 * n + 6)
+    work = np.empty(6 * 9 + 3 * 3 + 3 * n + 6)
     S_wb = work[0:9].reshape((3, 3))  # [ω_b]×
     S_we = work[9:18].reshape((3, 3))  # [ω_e]×
     R_bt = work[18:27].reshape((3, 3))
