@@ -117,8 +117,8 @@ def test_map_critical_step_matches_two_over_mu_when_stiffness_is_negligible(rng)
     J_x = np.eye(9)
     mu_max = theory.damping_rates(M, D)[-1]
     # Stiffness 1e-4 against damping O(1): its shift of the bound is O(k/d) ~ 1e-4.
-    dt_bis = theory.map_critical_step(M, D, 1e-4 * np.eye(9), J_x)
-    assert dt_bis == pytest.approx(2 / mu_max, rel=1e-3)
+    dt_map = theory.map_critical_step(M, D, 1e-4 * np.eye(9), J_x)
+    assert dt_map == pytest.approx(2 / mu_max, rel=1e-3)
     # With real stiffness the bound moves; the map, not 2/μ_max, is then the truth.
     dt_stiff = theory.map_critical_step(M, D, 50 * np.eye(9), J_x)
     assert dt_stiff != pytest.approx(2 / mu_max, rel=1e-3)

@@ -474,7 +474,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
     e = own.dominant_vector[shape.n_breve:2 * shape.n_breve]
     e = np.real(e * np.exp(-1j * np.angle(e[np.argmax(np.abs(e))])))  # real direction
     direction = T.gamma_inv @ np.concatenate([np.zeros(3), e])
-    dt_bis = theory.map_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
+    dt_map = theory.map_critical_step(M_b, D, K_x, J_x, "explicit", plant=plant,
                                       delay=delay, fraction=fraction)
     req = L.requirement
     fixes = mode_fixes(M_b, D, dt)
@@ -484,7 +484,7 @@ def theory_at_step(robot: GiordanoRobot, spec: Spec, log: VerifiedLog, k: int) -
         mu=mu.tolist(), mu_max=float(mu[-1]), dt_mu_max=float(dt * mu[-1]),
         # Two critical steps (eq. 24): the damping-only bound 2/μ_max, and the flown map's
         # (explicit, stiffness, plant and delay included), where its spectral radius reaches 1.
-        dt_star_damping=theory.critical_step(mu[-1]), dt_star_map=dt_bis,
+        dt_star_damping=theory.critical_step(mu[-1]), dt_star_map=dt_map,
         regime=root_regime(own.dominant),
         eig_dominant=rs.Complex.of(own.dominant),
         spectral_radius=own.spectral_radius,
