@@ -13,7 +13,17 @@ from pipeline.sim.linalg import dot, matmul
 @jit
 def skew(a: np.ndarray) -> np.ndarray:
     """[a]×, the matrix with [a]× b = a × b."""
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    S = np.empty((3, 3))
+    skew_into(S, a)
+    return S
+
+
+@jit
+def skew_into(S: np.ndarray, a: np.ndarray) -> None:
+    """S := [a]×."""
+    S[0, 0], S[0, 1], S[0, 2] = 0.0, -a[2], a[1]
+    S[1, 0], S[1, 1], S[1, 2] = a[2], 0.0, -a[0]
+    S[2, 0], S[2, 1], S[2, 2] = -a[1], a[0], 0.0
 
 
 @jit

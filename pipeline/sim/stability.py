@@ -219,6 +219,8 @@ def map_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
     """
     from scipy.optimize import brentq
 
+    from pipeline.sim.breve_controller import damping_rates  # compiled: imported on use
+
     @functools.cache  # the bracket's ends are asked for again by the search and by brentq
     def excess(dt: float) -> float:
         return spectral_radius(flown_map(M_breve, D_breve, K_x, J_x, dt, integrator, plant,
@@ -228,7 +230,8 @@ def map_critical_step(M_breve, D_breve, K_x, J_x, integrator: str = "explicit",
         return None
     if excess(lo) >= 0.0:
         return lo
-    mu_max = float(np.max(np.linalg.eigvals(np.linalg.solve(M_breve, D_breve)).real))
+    mu_max = float(damping_rates(np.ascontiguousarray(M_breve),
+                                 np.ascontiguousarray(D_breve))[-1])
     a = min(max(critical_step(mu_max) if mu_max > 0.0 else hi, lo), hi)
     b = a
     while a > lo and excess(a) >= 0.0:  # down to a stable step

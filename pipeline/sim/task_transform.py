@@ -27,7 +27,7 @@ from pipeline.sim.redundancy import (
     null_space_map,
     null_space_terms,
 )
-from pipeline.sim.rotations import skew
+from pipeline.sim.rotations import skew, skew_into
 from pipeline.sim.sampling import conditioning_from
 
 
@@ -136,14 +136,6 @@ def _entry(A, B, i, j):
 
 
 @jit
-def _skew_into(S, a):
-    """S := [a]×, entry for entry :func:`pipeline.sim.rotations.skew`."""
-    S[0, 0], S[0, 1], S[0, 2] = 0.0, -a[2], a[1]
-    S[1, 0], S[1, 1], S[1, 2] = a[2], 0.0, -a[0]
-    S[2, 0], S[2, 1], S[2, 2] = -a[1], a[0], 0.0
-
-
-@jit
 def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg, mass):
     """Γ̇ (eq. 7) from the Jacobian and centroidal-map time variations.
 
@@ -174,8 +166,8 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
         for k in range(nv):
             s += J_e[i, k] * v[k]
         twist_e[i] = s
-    _skew_into(S_wb, v[3:6])
-    _skew_into(S_we, twist_e[3:6])
+    skew_into(S_wb, v[3:6])
+    skew_into(S_we, twist_e[3:6])
     for i in range(3):
         for j in range(3):
             R_bt[i, j] = R_tb[j, i]
@@ -210,21 +202,21 @@ def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, A
         for j in range(3):
             g[i, j] = R_tb_dot[i, j]
             g[9 + i, 3 + j] = R_eb_dot[i, j]
-    _skew_into(S_x, p_bc)
+    skew_into(S_x, p_bc)
     for i in range(3):
         for j in range(3):
             g[i, 3 + j] = -_entry(R_tb_dot, S_x, i, j)
-    _skew_into(S_x, p_bc_dot)
+    skew_into(S_x, p_bc_dot)
     for i in range(3):
         for j in range(3):
             g[i, 3 + j] -= _entry(R_tb, S_x, i, j)
         for j in range(n):
             g[i, 6 + j] = _entry(R_tb_dot, J_bar_v, i, j) + _entry(R_tb, J_bar_v_dot, i, j)
-    _skew_into(S_x, p_ec_dot)
+    skew_into(S_x, p_ec_dot)
     for i in range(3):
         for j in range(3):
             g[6 + i, 3 + j] = _entry(S_x, R_eb, i, j)
-    _skew_into(S_x, p_ec)
+    skew_into(S_x, p_ec)
     for i in range(3):
         for j in range(3):
             g[6 + i, 3 + j] += _entry(S_x, R_eb_dot, i, j)
