@@ -27,7 +27,7 @@ from pipeline.sim.redundancy import (
     null_space_map,
     null_space_terms,
 )
-from pipeline.sim.rotations import skew, skew_into
+from pipeline.sim.rotations import skew
 from pipeline.sim.sampling import conditioning_from
 
 
@@ -127,105 +127,35 @@ def gamma_inverse(R_tb, p_bc, J_bar_v, G_wb, J_oplus_inv):
 
 
 @jit
-def _entry(A, B, i, j):
-    """(A B)[i, j], summed in order from 0.0 as :func:`pipeline.sim.linalg.matmul` sums it."""
-    s = 0.0
-    for k in range(A.shape[1]):
-        s += A[i, k] * B[k, j]
-    return s
-
-
-@jit
 def gamma_time_derivative(R_tb, R_te, R_eb, p_bc, p_ec, J_bar_v, J_e, v, dJ_e, Ag, dAg, mass):
     """Γ̇ (eq. 7) from the Jacobian and centroidal-map time variations.
 
     Ṙ_tb = R_tb [ω_b]×;  ṗ_bc = J̄_v q̇;  J̄̇_v = −[ω_b]× J̄_v + R_bt Ȧg[0:3, 6:]/m;
     Ṙ_eb = R_eb [ω_b]× − [ω_e]× R_eb;  ṗ_ec = R_et Ag[0:3] v/m − [ω_e]× p_ec − v_e;
     Ġ_ωb = [[ṗ_ec]× R_eb + [p_ec]× Ṙ_eb; Ṙ_eb];  J̇⊕ = J̇_e[:, 6:] − [Ṙ_eb J̄_v + R_eb J̄̇_v; 0].
-
-    Each entry is the sum of products the matrix form gives, in its order (so the same bits
-    as products of whole matrices), written into Γ̇ and one scratch buffer: a step calls this
-    once, and ninety small arrays of the matrix form cost it seven times its arithmetic.
     """
-    nv = J_e.shape[1]
-    n = nv - 6
-    work = np.empty(6 * 9 + 3 * 3 + 3 * n + 6)
-    S_wb = work[0:9].reshape((3, 3))  # [ω_b]×
-    S_we = work[9:18].reshape((3, 3))  # [ω_e]×
-    R_bt = work[18:27].reshape((3, 3))
-    R_tb_dot = work[27:36].reshape((3, 3))
-    R_eb_dot = work[36:45].reshape((3, 3))
-    S_x = work[45:54].reshape((3, 3))  # [p_bc]×, [ṗ_bc]×, [ṗ_ec]×, [p_ec]× in turn
-    p_bc_dot = work[54:57]
-    p_c_dot = work[57:60]
-    p_ec_dot = work[60:63]
-    J_bar_v_dot = work[63:63 + 3 * n].reshape((3, n))
-    twist_e = work[63 + 3 * n:69 + 3 * n]  # [v_e; ω_e], J_e v
-    for i in range(6):
-        s = 0.0
-        for k in range(nv):
-            s += J_e[i, k] * v[k]
-        twist_e[i] = s
-    skew_into(S_wb, v[3:6])
-    skew_into(S_we, twist_e[3:6])
-    for i in range(3):
-        for j in range(3):
-            R_bt[i, j] = R_tb[j, i]
-    for i in range(3):
-        for j in range(n):
-            s = 0.0
-            for k in range(3):
-                s += R_bt[i, k] * dAg[k, 6 + j]
-            J_bar_v_dot[i, j] = -_entry(S_wb, J_bar_v, i, j) + s / mass
-        s = 0.0
-        for k in range(n):
-            s += J_bar_v[i, k] * v[6 + k]
-        p_bc_dot[i] = s
-        s = 0.0
-        for k in range(nv):
-            s += Ag[i, k] * v[k]
-        p_c_dot[i] = s / mass
-        for j in range(3):
-            R_eb_dot[i, j] = _entry(R_eb, S_wb, i, j) - _entry(S_we, R_eb, i, j)
-            R_tb_dot[i, j] = _entry(R_tb, S_wb, i, j)
-    for i in range(3):
-        s = 0.0
-        for k in range(3):
-            s += R_te[k, i] * p_c_dot[k]
-        t = 0.0
-        for k in range(3):
-            t += S_we[i, k] * p_ec[k]
-        p_ec_dot[i] = s - t - twist_e[i]
+    w_b = v[3:6].copy()
+    qd = v[6:].copy()
+    twist_e = matvec(np.ascontiguousarray(J_e), v)
+    v_e, w_e = twist_e[:3].copy(), twist_e[3:].copy()
+    S_wb, S_we = skew(w_b), skew(w_e)
+    R_bt = np.ascontiguousarray(R_tb.T)
+    J_bar_v_dot = (-matmul(S_wb, J_bar_v)
+                   + matmul(R_bt, np.ascontiguousarray(dAg[0:3, 6:])) / mass)
+    p_bc_dot = matvec(J_bar_v, qd)
+    R_eb_dot = matmul(R_eb, S_wb) - matmul(S_we, R_eb)
+    p_c_dot = matvec(np.ascontiguousarray(Ag[0:3]), v) / mass
+    p_ec_dot = matvec(np.ascontiguousarray(R_te.T), p_c_dot) - matvec(S_we, p_ec) - v_e
+    R_tb_dot = matmul(R_tb, S_wb)
     # The rows of [v_c; ω_b; ν_e⊕] (square for six joints; eq. 37e adds a redundant arm's).
-    g = np.zeros((12, nv))
-    for i in range(3):
-        for j in range(3):
-            g[i, j] = R_tb_dot[i, j]
-            g[9 + i, 3 + j] = R_eb_dot[i, j]
-    skew_into(S_x, p_bc)
-    for i in range(3):
-        for j in range(3):
-            g[i, 3 + j] = -_entry(R_tb_dot, S_x, i, j)
-    skew_into(S_x, p_bc_dot)
-    for i in range(3):
-        for j in range(3):
-            g[i, 3 + j] -= _entry(R_tb, S_x, i, j)
-        for j in range(n):
-            g[i, 6 + j] = _entry(R_tb_dot, J_bar_v, i, j) + _entry(R_tb, J_bar_v_dot, i, j)
-    skew_into(S_x, p_ec_dot)
-    for i in range(3):
-        for j in range(3):
-            g[6 + i, 3 + j] = _entry(S_x, R_eb, i, j)
-    skew_into(S_x, p_ec)
-    for i in range(3):
-        for j in range(3):
-            g[6 + i, 3 + j] += _entry(S_x, R_eb_dot, i, j)
-    for i in range(6):
-        for j in range(n):
-            g[6 + i, 6 + j] = dJ_e[i, 6 + j]
-    for i in range(3):
-        for j in range(n):
-            g[6 + i, 6 + j] -= _entry(R_eb_dot, J_bar_v, i, j) + _entry(R_eb, J_bar_v_dot, i, j)
+    g = np.zeros((12, J_e.shape[1]))
+    g[0:3, 0:3] = R_tb_dot
+    g[0:3, 3:6] = -matmul(R_tb_dot, skew(p_bc)) - matmul(R_tb, skew(p_bc_dot))
+    g[0:3, 6:] = matmul(R_tb_dot, J_bar_v) + matmul(R_tb, J_bar_v_dot)
+    g[6:9, 3:6] = matmul(skew(p_ec_dot), R_eb) + matmul(skew(p_ec), R_eb_dot)
+    g[9:12, 3:6] = R_eb_dot
+    g[6:, 6:] = dJ_e[:, 6:]
+    g[6:9, 6:] -= matmul(R_eb_dot, J_bar_v) + matmul(R_eb, J_bar_v_dot)
     return g
 
 
