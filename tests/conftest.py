@@ -9,8 +9,10 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -124,6 +126,17 @@ def sealed(table, metadata: dict[bytes, bytes]):
 # -- The kernels: compiled once per session, before the first test ---------------------------
 
 _COMPILE_FAILED: list[str] = []  # the compile stage's error, raised again by every test
+# A copy of the kernel cache as the session's compile left it, when it started from an empty
+# cache (a fresh clone, as in CI, or sources just edited), taken before the first test can add
+# to it: tests/test_compile.py checks that compile instead of making a second one.
+_COLD_COMPILE: list[Path] = []
+
+
+def _kernel_cache() -> Path:
+    """The kernel cache this session's processes use (pipeline/sim/jit.py)."""
+    from pipeline.sim.jit import kernel_cache_dir
+
+    return Path(os.environ.get("NUMBA_CACHE_DIR") or kernel_cache_dir())
 
 
 def pytest_collection_finish(session):
@@ -136,12 +149,18 @@ def pytest_collection_finish(session):
     if session.config.option.collectonly or not session.items:
         return
     t0 = time.monotonic()
+    cache = _kernel_cache()
+    cold = not os.environ.get("NUMBA_DISABLE_JIT") and not any(cache.rglob("*.nbi"))
     r = subprocess.run([sys.executable, "-m", "pipeline", "compile"], cwd=PROJECT_ROOT,
                        capture_output=True, text=True, timeout=900)
     lines = r.stderr.strip().splitlines() or ["compile: (no output)"]
     if r.returncode != 0:
         _COMPILE_FAILED.append(f"the compile stage failed (exit {r.returncode}): "
                                + "\n".join(lines[-20:]))
+    elif cold and cache.is_dir():
+        copy = Path(tempfile.mkdtemp(prefix="breve-cold-compile-")) / "kernels"
+        shutil.copytree(cache, copy)
+        _COLD_COMPILE.append(copy)
     tr = session.config.pluginmanager.get_plugin("terminalreporter")
     line = f"tests: {lines[-1]} ({time.monotonic() - t0:.1f} s, before the first test)"
     if tr is not None:
@@ -155,6 +174,18 @@ def _kernels_compiled():
     """Every test: the kernels were compiled before it (pytest_collection_finish)."""
     if _COMPILE_FAILED:
         pytest.fail(_COMPILE_FAILED[0], pytrace=False)
+
+
+@pytest.fixture(scope="session")
+def cold_compile() -> Path | None:
+    """The session's compile into an empty cache, as it left the cache (a copy: a test may
+    use it as its own cache), or None when the session's cache was not empty."""
+    return _COLD_COMPILE[0] if _COLD_COMPILE else None
+
+
+def pytest_sessionfinish(session, exitstatus):
+    for copy in _COLD_COMPILE:
+        shutil.rmtree(copy.parent, ignore_errors=True)
 
 
 # -- SLURM tests: CI must run them -----------------------------------------------------------
