@@ -49,6 +49,9 @@ def test_against_states_robot_dt_duration_and_windows(logs, tmp_path, capsys):
     assert re.search(rf"window {sa:.4g}–{da:.4g} s vs {sb:.4g}–{db:.4g} s", line)
     assert f"note: different durations ({da:.4g} s vs {db:.4g} s)" in text
     assert "note: different windows" in text
+    # Coverage grows along the orbit: runs of different lengths have no coverage difference.
+    assert rec["comparison"]["coverage_diff_pp"] is None
+    assert "coverage difference not compared (different durations)" in text
 
 
 def test_against_names_no_difference_when_durations_agree(logs, tmp_path, capsys):
@@ -60,6 +63,8 @@ def test_against_names_no_difference_when_durations_agree(logs, tmp_path, capsys
     assert "compares a_nominal with a_nominal" in text
     assert "different durations" not in text and "different windows" not in text
     assert "tests neither the step nor the integrator" in text
+    rec = _record(tmp_path, "a_nominal")
+    assert rec["comparison"]["coverage_diff_pp"] == 0.0 and "coverage difference 0.00 pp" in text
 
 
 def test_against_another_robot_is_refused(logs, tmp_path, capsys):

@@ -185,6 +185,36 @@ def test_mechanism_report_numbers_come_from_analysis_json():
     assert "imex" in imex and "keeps every mode stable" in imex
 
 
+def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
+    """The causal test of a pair whose runs flew different lengths names both, and neither the
+    analysis nor the report compares their coverage (it grows along the orbit); with no r₁
+    flip the report does not call the flip the dt-independent evidence."""
+    from dataclasses import replace
+
+    from pipeline.reports.mechanism import mechanism_context
+    from pipeline.reports.render import load_runs
+    from pipeline.reports.templating import render
+
+    b = built()
+    runs = load_runs(b.reports)
+    run = next(r for r in runs if r.name == "t_nominal")
+    comp = run.record.comparison
+    assert comp.coverage_diff_pp is not None  # the fixture's pair flew the same mission
+    shorter = replace(comp.other, n_steps=comp.other.n_steps // 2)
+    run = replace(run, record=replace(run.record, comparison=replace(
+        comp, other=shorter, coverage_diff_pp=None, lag1_flip=False)))
+    ctx = mechanism_context(run, runs)
+    md = render("mechanism.md.j2", tmp_path / "m.md", **ctx).read_text()
+    html = render("mechanism.html.j2", tmp_path / "m.html", **ctx).read_text()
+    seconds = (run.record.n_steps * run.record.dt, shorter.n_steps * shorter.dt)
+    assert "runs the same mission" not in md
+    assert f"for {seconds[1]:.4g} s, this run for {seconds[0]:.4g} s" in md
+    assert "Coverage differs" not in md + html
+    assert md.count(f"Coverage is not compared: the runs flew {seconds[0]:.4g} s and "
+                    f"{seconds[1]:.4g} s.") == 1
+    assert "the r₁ flip is the dt-independent evidence" not in md
+
+
 def test_cross_check_markdown_has_a_row_per_equation_with_file_and_line():
     b = built()
     md = (b.reports / "GNC" / "cross_check.md").read_text()

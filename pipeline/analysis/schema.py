@@ -332,16 +332,24 @@ class CompleteRecord(Identity):
     directions_sha256: str | None = field(default=None, metadata=ABSENT_WHILE_NONE)
 
 
+def same_duration(a: Identity, b: Identity) -> bool:
+    """Whether two runs flew the same length of mission, to within a step of the coarser
+    (a run's steps are its duration over its dt, rounded to a whole step)."""
+    return abs(a.n_steps * a.dt - b.n_steps * b.dt) <= max(a.dt, b.dt)
+
+
 @dataclass(frozen=True)
 class Comparison:
     """Stage 7: this run against another of the same robot (``other``: its whole record, as
-    analysed, without the fields only a written record has)."""
+    analysed, without the fields only a written record has). ``coverage_diff_pp`` is None
+    when the two flew different durations (:func:`same_duration`): coverage grows along the
+    orbit, so the difference would measure the lengths, not the ripple."""
 
     against: str
     against_log: str
     lag1_flip: bool
     amplitude_ratio: float
-    coverage_diff_pp: float
+    coverage_diff_pp: float | None
     table: list[dict[str, Any]]
     other: CompleteRecord
 

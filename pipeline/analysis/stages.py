@@ -676,7 +676,8 @@ def compare(a: rs.CompleteRecord, b: rs.CompleteRecord) -> rs.Comparison:
         # An undetermined lag-1 flips nothing: the sign of no motion is no evidence.
         lag1_flip=la is not None and lb is not None and bool(np.sign(la) != np.sign(lb)),
         amplitude_ratio=a.velocity_jump.median / b.velocity_jump.median,
-        coverage_diff_pp=100 * abs(a.metrics.coverage_final - b.metrics.coverage_final),
+        coverage_diff_pp=(100 * abs(a.metrics.coverage_final - b.metrics.coverage_final)
+                          if rs.same_duration(a, b) else None),
         table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}
                for label, p in COMPARE_ROWS],
         other=replace(b, schema=None, record_sha256=None, directions_sha256=None,

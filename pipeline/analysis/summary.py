@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pipeline.analysis.joint_ranges import excursion_words
-from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord
+from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, ImportedRecord, same_duration
 from pipeline.analysis.verdict import ModeLoop, Prediction, measured_words
 
 
@@ -37,7 +37,7 @@ def basis_lines(a: CompleteRecord, b: CompleteRecord) -> list[str]:
     # Equal to within a step of the coarser run: a window that starts at step n//2 of each
     # run starts at times one step apart at most, which is no difference of substance.
     step = max(a.dt, b.dt)
-    if abs(da - db) > step:
+    if not same_duration(a, b):
         lines.append(f"  note: different durations ({da:.4g} s vs {db:.4g} s)")
     if abs(sa - sb) > step or abs(ea - eb) > step:
         lines.append(f"  note: different windows ({sa:.4g}–{ea:.4g} s vs {sb:.4g}–{eb:.4g} s)")
@@ -74,9 +74,10 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
                      f"earliest arrival {lat.earliest_radius:.6g}); {lat.verdict}")
     if record.comparison is not None:
         c = record.comparison
+        coverage = ("not compared (different durations)" if c.coverage_diff_pp is None
+                    else f"{c.coverage_diff_pp:.2f} pp")
         lines.append(f"  vs {c.against}: lag-1 flip {c.lag1_flip}, ‖Δv‖ ratio "
-                     f"{c.amplitude_ratio:.3g}, coverage difference "
-                     f"{c.coverage_diff_pp:.2f} pp")
+                     f"{c.amplitude_ratio:.3g}, coverage difference {coverage}")
         lines += basis_lines(record, c.other)
     return lines
 

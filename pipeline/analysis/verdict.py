@@ -101,7 +101,7 @@ def mode_loops(M_breve: np.ndarray, D_breve: np.ndarray, dt: float, integrator: 
             share=float(m.shares[m.block]), mu=m.mu, dt_mu=dt * m.mu, omega_n=wn,
             damping_ratio=m.mu / (2 * wn) if wn > 0 else None, loop_gain=g,
             root=mg.Complex.of(z), modulus=abs(z), period_steps=mg.period_steps(z),
-            regime=mg.root_regime(z), rings=bool(abs(z) >= mg.UNIT),
+            regime=mg.root_regime(z, "the mode's own loop"), rings=bool(abs(z) >= mg.UNIT),
             margins=mg.margins(g, delay, dt, req, fraction), vector=m.vector.tolist()))
     return out
 

@@ -10,7 +10,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from pipeline.analysis.joint_ranges import excursion_words, range_mark
-from pipeline.analysis.schema import AnalysisRecord, CompleteRecord, Theory, value_at
+from pipeline.analysis.schema import (
+    AnalysisRecord,
+    CompleteRecord,
+    Theory,
+    same_duration,
+    value_at,
+)
 from pipeline.claims.seed_note import (
     NOTE_FILE,
     column_regimes,
@@ -217,6 +223,9 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
         "other_mode": damping_mode(other.theory), "limits": limits,
         "flipped": flipped, "n_directions": len(other.directions),
+        # The causal test's words: the same mission only where both flew it whole.
+        "same_mission": same_duration(rec, other),
+        "seconds": (rec.n_steps * rec.dt, other.n_steps * other.dt),
         "fix_runs": fixes, "diag_D": np.diag(np.array(th.D_breve)).tolist(),
         "lag1_smooth": LAG1_SMOOTH, "ringing": ringing_words(rec),
         "card": robot_card(rec), "robot_file": str(run.spec.get("robot", {}).get("file", "?")),

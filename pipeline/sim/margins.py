@@ -155,16 +155,18 @@ def period_steps(z: complex) -> float | None:
     return None if angle == 0.0 else 2.0 * math.pi / angle
 
 
-def root_regime(z: complex) -> str:
-    """The behaviour a mode's dominant root gives the linear loop (eqs. 23, 35). 'Unstable'
-    is the linear loop's: what holds the motion, and whether it grows, is the data's to say."""
+def root_regime(z: complex, loop: str = "the linear loop") -> str:
+    """The behaviour a dominant root gives its loop (eqs. 23, 35): ``loop`` names which, the
+    whole map's (the default) or one mode's scalar loop, whose growth differs from the whole
+    map's where the stiffness couples the modes. 'Unstable' is the linear loop's: what holds
+    the motion, and whether it grows, is the data's to say."""
     m, period = abs(z), period_steps(z)
     kind = ("monotone" if period is None else "period-2" if abs(z.imag) <= 1e-12 * m
             else f"oscillation over {period:.3g} steps")
     if math.isclose(m, UNIT, rel_tol=0.0, abs_tol=1e-12):
         return f"marginal ({kind})"
     if m > UNIT:
-        return f"unstable: {kind}, ×{m:.3g} per step in the linear loop"
+        return f"unstable: {kind}, ×{m:.3g} per step in {loop}"
     if period is None:
         return "stable: monotone decay"
     return "stable: decaying 2-cycle" if kind == "period-2" else f"stable: decaying {kind}"
