@@ -133,10 +133,26 @@ _COLD_COMPILE: list[Path] = []
 
 
 def _kernel_cache() -> Path:
-    """The kernel cache this session's processes use (pipeline/sim/jit.py)."""
+    """The kernel cache the session's compile writes (pipeline/sim/jit.py; a relative
+    ``NUMBA_CACHE_DIR`` is the compile's, run from the project's root)."""
     from pipeline.sim.jit import kernel_cache_dir
 
-    return Path(os.environ.get("NUMBA_CACHE_DIR") or kernel_cache_dir())
+    return PROJECT_ROOT / (os.environ.get("NUMBA_CACHE_DIR") or kernel_cache_dir())
+
+
+def _copy_of_cold_cache(session, cache: Path) -> None:
+    """Keep a copy of the cache the session's compile filled from nothing, when a
+    ``compile`` test is selected to check it; a copy that fails leaves that test its own
+    compile."""
+    if not any(item.get_closest_marker("compile") for item in session.items):
+        return
+    folder = Path(tempfile.mkdtemp(prefix="breve-cold-compile-"))
+    try:
+        shutil.copytree(cache, folder / "kernels")
+    except OSError:
+        shutil.rmtree(folder, ignore_errors=True)
+        return
+    _COLD_COMPILE.append(folder / "kernels")
 
 
 def pytest_collection_finish(session):
@@ -150,7 +166,9 @@ def pytest_collection_finish(session):
         return
     t0 = time.monotonic()
     cache = _kernel_cache()
-    cold = not os.environ.get("NUMBA_DISABLE_JIT") and not any(cache.rglob("*.nbi"))
+    # Nothing there at all (a cache with a stamp and no kernels is not an empty one).
+    cold = (not os.environ.get("NUMBA_DISABLE_JIT")
+            and not (cache.is_dir() and any(cache.iterdir())))
     r = subprocess.run([sys.executable, "-m", "pipeline", "compile"], cwd=PROJECT_ROOT,
                        capture_output=True, text=True, timeout=900)
     lines = r.stderr.strip().splitlines() or ["compile: (no output)"]
@@ -158,9 +176,7 @@ def pytest_collection_finish(session):
         _COMPILE_FAILED.append(f"the compile stage failed (exit {r.returncode}): "
                                + "\n".join(lines[-20:]))
     elif cold and cache.is_dir():
-        copy = Path(tempfile.mkdtemp(prefix="breve-cold-compile-")) / "kernels"
-        shutil.copytree(cache, copy)
-        _COLD_COMPILE.append(copy)
+        _copy_of_cold_cache(session, cache)
     tr = session.config.pluginmanager.get_plugin("terminalreporter")
     line = f"tests: {lines[-1]} ({time.monotonic() - t0:.1f} s, before the first test)"
     if tr is not None:

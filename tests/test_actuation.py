@@ -140,6 +140,32 @@ def test_attitude_jitter_adds_the_instants_and_the_excursion():
     assert both.jitter_deg == pytest.approx(np.degrees(A) + eps, rel=1e-9)
 
 
+def test_a_six_step_cycle_is_seen_whole_by_the_short_period_peak_to_peak():
+    """A delayed loop's relay cycle over six steps, in the torque and in the bus attitude about
+    a tilted axis on a slow turn: its period-2 amplitude reads a fraction of it, the
+    short-period peak to peak (eq. 30b) reads √3 A, the peak to peak of A sin(2πk/6)."""
+    n, A, T = 600, 0.004, 0.156
+    k = np.arange(n)
+    wave = np.sin(2 * np.pi * k / 6)
+    axis = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
+    quat = Rotation.from_rotvec(np.outer(0.0005 * k + A * wave, axis)).as_quat()
+    q = np.c_[np.zeros((n, 3)), quat, np.zeros((n, 6))]
+    u = np.zeros((n, 12))
+    u[:, 5] = T * wave + 0.01  # τ_b about z_b, on a bias
+    h = harm(u, np.zeros((n, 12)), q, np.zeros(n), 0.03)
+    assert h.bus_torque.channel == "z_b"
+    assert h.bus_torque.short_period_peak_to_peak == pytest.approx(np.sqrt(3) * T, rel=1e-3)
+    assert h.bus_torque.period2_amplitude < 0.2 * T
+    # The largest bus axis: the tilted axis' largest component carries that share of it.
+    assert h.attitude.short_period_deg == pytest.approx(
+        np.degrees(np.sqrt(3) * A * axis.max()), rel=1e-3)
+    assert h.attitude.at_instants_deg < 0.2 * np.degrees(A)
+    # Too short a window for the band's filter: no figure rather than a wrong one.
+    short = harm(u[:100], np.zeros((100, 12)), q[:100], np.zeros(100), 0.03)
+    assert short.bus_torque.short_period_peak_to_peak is None
+    assert short.attitude.short_period_deg is None
+
+
 @pytest.mark.parametrize(("name", "mode"), [
     ("short_nominal", "bus yaw ω_b,z"),
     ("short_servicer_nominal", "camera roll ω_e,z (about the boresight)")])

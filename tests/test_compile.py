@@ -66,7 +66,7 @@ print(sorted(f"{m}.{k}" for m, mod in list(sys.modules.items()) if m.startswith(
 """
 
 
-@pytest.mark.compile  # every kernel into an empty cache: about a minute on two cores
+@pytest.mark.compile  # into an empty cache (a minute on two cores), or the session's
 def test_from_an_empty_cache_the_stage_compiles_each_kernel_once_and_then_nothing_compiles(
         tmp_path, cold_compile, record_property):
     """The stage as `make all` runs it (two processes taking the units in turn) into an empty

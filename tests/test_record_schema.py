@@ -44,7 +44,7 @@ def test_a_written_record_reads_back_whole_and_of_its_kind(typed, tmp_path):
     path = write_analysis(typed, tmp_path)
     text = path.read_text()
     back = read_analysis(path)
-    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/10"
+    assert isinstance(back, CompleteRecord) and back.schema == "breve-analysis/11"
     assert check_record(json.loads(text)) is None
     # The same record, field by field, with the three fields the writer sets.
     assert back == dataclasses.replace(typed, schema=back.schema,

@@ -186,9 +186,10 @@ def test_mechanism_report_numbers_come_from_analysis_json():
 
 
 def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
-    """The causal test of a pair whose runs flew different lengths names both, and neither the
-    analysis nor the report compares their coverage (it grows along the orbit); with no r₁
-    flip the report does not call the flip the dt-independent evidence."""
+    """The fixture's pair differs in the step alone: the same mission, coverage compared. The
+    same pair with the other run flown half as long: both durations named, the orbit's rows
+    marked, coverage not compared (it grows along the orbit); with no r₁ flip the report does
+    not call the flip the dt-independent evidence."""
     from dataclasses import replace
 
     from pipeline.reports.mechanism import mechanism_context
@@ -196,10 +197,11 @@ def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
     from pipeline.reports.templating import render
 
     b = built()
+    assert "runs the same mission at dt" in (b.reports / "t_nominal" / "mechanism.md").read_text()
     runs = load_runs(b.reports)
     run = next(r for r in runs if r.name == "t_nominal")
     comp = run.record.comparison
-    assert comp.coverage_diff_pp is not None  # the fixture's pair flew the same mission
+    assert comp.coverage_diff_pp is not None
     shorter = replace(comp.other, n_steps=comp.other.n_steps // 2)
     run = replace(run, record=replace(run.record, comparison=replace(
         comp, other=shorter, coverage_diff_pp=None, lag1_flip=False)))
@@ -210,9 +212,21 @@ def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
     assert "runs the same mission" not in md
     assert f"for {seconds[1]:.4g} s, this run for {seconds[0]:.4g} s" in md
     assert "Coverage differs" not in md + html
-    assert md.count(f"Coverage is not compared: the runs flew {seconds[0]:.4g} s and "
-                    f"{seconds[1]:.4g} s.") == 1
+    assert md.count("Coverage is not compared: another mission") == 1
+    assert md.count("final coverage (another mission: not compared)") == 2  # §4 and §7
     assert "the r₁ flip is the dt-independent evidence" not in md
+
+
+def test_spec_differences_name_every_dotted_key_but_the_name_and_description():
+    from pipeline.reports.mechanism import spec_differences
+
+    a = {"name": "a", "description": "x", "mission": {"dt": 0.03, "duration": 60.0},
+         "robot": {"q_bar": [0.0, 1.0]}, "controller": {"integrator": "explicit"}}
+    b = {"name": "b", "description": "y", "mission": {"dt": 0.01, "duration": 60.0},
+         "robot": {"q_bar": [0.0, 1.5]}, "controller": {"integrator": "explicit"},
+         "extra": 1}
+    assert spec_differences(a, b) == ["extra", "mission.dt", "robot.q_bar"]
+    assert spec_differences(a, a) == []
 
 
 def test_cross_check_markdown_has_a_row_per_equation_with_file_and_line():

@@ -20,7 +20,13 @@ reversals per second).
   at a constant rate over a step, so its ripple sits at the instants; under a held torque
   (eq. 29) the rate ramps and the instants fall on the oscillation's zero crossings, its
   amplitude between them. The sum is the continuous attitude's period-2 amplitude in both
-  cases, and a bound on it otherwise.
+  cases, and a bound on it otherwise;
+- short-period peak to peak (eq. 30b): max − min of a series' short-period part (eq. 36's
+  band, periods up to ``BAND_STEPS``), for the torque and for the bus attitude at the
+  instants (θ_k = Σ_{j<k} δ_j, the bus frame's rotations summed, per axis). A period-2
+  amplitude reads a period-2 cycle only: the relay cycle of a delayed loop, over some six
+  steps, moves the bus several times more than its period-2 part says, and this statistic
+  sees it (a period-2 cycle of amplitude a reads 2a).
 """
 
 from __future__ import annotations
@@ -42,6 +48,8 @@ class ChannelHarm:
     rms: float  # RMS over the window of the channels' norm
     channel: str  # the channel of largest period-2 amplitude
     period2_amplitude: float  # its a = RMS(Δ²x)/4 (eq. 30)
+    # its short-period part's peak to peak (eq. 30b); None: a window too short to judge
+    short_period_peak_to_peak: float | None
     reversal_share: float  # its share of sign reversals between consecutive steps (eq. 31)
     reversals_per_s: float  # reversal_share / dt
 
@@ -55,6 +63,9 @@ class AttitudeHarm:
     at_instants_deg: float
     between_instants_deg: float
     step_deg_median: float  # the median rotation of the bus over one step
+    # the attitude's short-period part at the instants, peak to peak, largest over the bus
+    # axes (eq. 30b); None: a window too short to judge
+    short_period_deg: float | None
 
 
 @dataclass(frozen=True)
@@ -72,6 +83,18 @@ def period2_amplitude(x: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(np.diff(np.asarray(x, dtype=float), 2, axis=0) ** 2, axis=0)) / 4
 
 
+def short_period_peak_to_peak(x: np.ndarray) -> np.ndarray | None:
+    """max − min of the short-period part (eq. 36's band) along axis 0 (eq. 30b); None when
+    the series is too short for the band's filter (``MIN_STEPS``) or not finite."""
+    from pipeline.analysis.ringing import MIN_STEPS, short_period_part
+
+    x = np.asarray(x, dtype=float)
+    if len(x) < MIN_STEPS or not np.all(np.isfinite(x)):
+        return None
+    columns = x.reshape(len(x), -1).T  # one series at a time: the part trims its ends
+    return np.array([np.ptp(short_period_part(c)) for c in columns]).reshape(x.shape[1:])
+
+
 def reversal_share(x: np.ndarray) -> np.ndarray:
     """The share of k with x_k·x_{k+1} < 0, along axis 0 (eq. 31); an exact zero reverses
     nothing."""
@@ -85,9 +108,11 @@ def channel_harm(x: np.ndarray, dt: float, names: tuple[str, ...]) -> ChannelHar
     amp = period2_amplitude(x)
     i = int(np.argmax(amp))
     share = float(reversal_share(x[:, i]))
+    pp = short_period_peak_to_peak(x[:, i])
     return ChannelHarm(rms=float(np.sqrt(np.mean(np.sum(x * x, axis=1)))), channel=names[i],
-                       period2_amplitude=float(amp[i]), reversal_share=share,
-                       reversals_per_s=share / dt)
+                       period2_amplitude=float(amp[i]),
+                       short_period_peak_to_peak=None if pp is None else float(pp),
+                       reversal_share=share, reversals_per_s=share / dt)
 
 
 def attitude_steps(quat_tb: np.ndarray) -> np.ndarray:
@@ -116,14 +141,21 @@ def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.
     at_instants = np.degrees(attitude_jitter(q[:, Q.quat_tb]))  # instants 1 … N−2
     between = np.asarray(excursion_deg, dtype=float)
     jitter = at_instants + between[1:-1]
-    steps = np.degrees(np.linalg.norm(attitude_steps(q[:, Q.quat_tb]), axis=1))
+    delta = attitude_steps(q[:, Q.quat_tb])
+    steps = np.degrees(np.linalg.norm(delta, axis=1))
+    # The attitude at the instants from the steps' rotations summed: exact about a fixed
+    # axis, and off by products of the slow turn and the ripple otherwise.
+    theta = np.vstack([np.zeros(3), np.cumsum(delta, axis=0)])
+    pp = short_period_peak_to_peak(theta)
     return Harm(bus_torque=channel_harm(u_applied[:, U.tau_b], dt, BUS_TORQUE_AXES),
                 joint_torque=channel_harm(u_applied[:, U.joints], dt, joints),
                 joint_rate=channel_harm(v[:, V.joints], dt, joints),
                 attitude=AttitudeHarm(jitter_deg=_rms(jitter), jitter_deg_max=float(jitter.max()),
                                       at_instants_deg=_rms(at_instants),
                                       between_instants_deg=_rms(between),
-                                      step_deg_median=float(np.median(steps))))
+                                      step_deg_median=float(np.median(steps)),
+                                      short_period_deg=(None if pp is None else
+                                                        float(np.degrees(pp.max())))))
 
 
 @dataclass(frozen=True)

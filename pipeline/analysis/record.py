@@ -50,7 +50,7 @@ from pipeline.errors import LogError
 # theory.s_min_G_target where the step was chosen nearest a σ_min(Γ) (issue 50); /10:
 # prediction.agrees null when undetermined (never false), with undetermined_why and
 # least_mission_steps, and each ring's own reason (Ring.undetermined) (issue 51).
-SCHEMA = "breve-analysis/10"
+SCHEMA = "breve-analysis/11"
 CONTENT_KEY = "record_sha256"
 RECORD_NAME = ANALYSIS_FILE
 TABLE_NAME = DIRECTIONS_FILE

@@ -1,4 +1,4 @@
-"""The analysis record (``analysis.json``, schema ``breve-analysis/8``): its typed structure,
+"""The analysis record (``analysis.json``, its schema ``record.SCHEMA``): its typed structure,
 its one serialisation, and the check of a record read from disk.
 
 The record is a tree of frozen dataclasses (:class:`CompleteRecord` for a complete log,

@@ -144,6 +144,8 @@ HARM_ROWS = (
     ("bus torque, RMS of ‖τ_b‖", "N·m", ("harm", "bus_torque", "rms"), None),
     ("bus torque, period-2 amplitude", "N·m", ("harm", "bus_torque", "period2_amplitude"),
      ("harm", "bus_torque", "channel")),
+    ("bus torque, short-period peak to peak (eq. 30b)", "N·m",
+     ("harm", "bus_torque", "short_period_peak_to_peak"), ("harm", "bus_torque", "channel")),
     ("bus torque, reversal share", "", ("harm", "bus_torque", "reversal_share"),
      ("harm", "bus_torque", "channel")),
     ("bus torque, reversals per second", "1/s", ("harm", "bus_torque", "reversals_per_s"),
@@ -159,6 +161,8 @@ HARM_ROWS = (
     ("bus attitude jitter", "deg", ("harm", "attitude", "jitter_deg"), None),
     ("… at the control instants", "deg", ("harm", "attitude", "at_instants_deg"), None),
     ("… between them", "deg", ("harm", "attitude", "between_instants_deg"), None),
+    ("bus attitude at the instants, short-period peak to peak (eq. 30b)", "deg",
+     ("harm", "attitude", "short_period_deg"), None),
 )
 
 
@@ -195,6 +199,35 @@ def note_rows(records: dict[str, CompleteRecord], claims: dict | None = None) ->
     return note_table(load_note(NOTE_FILE), records, claims["claims"] if claims else None)
 
 
+# What a causal test varies between its two runs; any other difference between their specs
+# (a posture, a duration, a gain) makes the other run another mission, whose coverage and
+# pointing do not compare with this one's.
+CAUSAL_KNOBS = ("mission.dt", "controller.integrator")
+# The rows of the orbit's quantities, in the evidence table (stage 7's) and the harm table.
+ORBIT_ROWS = ("max pointing error (deg)", "final coverage", "max z_b pointing error (deg)")
+
+
+def spec_differences(a: dict, b: dict, prefix: str = "") -> list[str]:
+    """The dotted keys at which two resolved specs differ, their names and descriptions
+    aside."""
+    out = []
+    for key in sorted(set(a) | set(b)):
+        if not prefix and key in ("name", "description"):
+            continue
+        va, vb = a.get(key), b.get(key)
+        if isinstance(va, dict) and isinstance(vb, dict):
+            out += spec_differences(va, vb, f"{prefix}{key}.")
+        elif va != vb:
+            out.append(f"{prefix}{key}")
+    return out
+
+
+def _orbit_marked(rows: list[dict], same_mission: bool) -> list[dict]:
+    """The rows, the orbit's quantities marked where the pair flew different missions."""
+    return [{**r, "quantity": f"{r['quantity']} (another mission: not compared)"}
+            if not same_mission and r["quantity"] in ORBIT_ROWS else r for r in rows]
+
+
 def mechanism_context(run: RunData, others: list[RunData], claims: dict | None = None) -> dict:
     """Everything the mechanism templates show, for ``run`` and its comparison; ``claims``
     (claims.json) judges the seed note's table."""
@@ -203,8 +236,12 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     other = comp.other
     th = rec.theory
     names = (rec.spec_name, other.spec_name)
-    rows = [{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
-            for r in comp.table]
+    differs = (None if run.against is None else
+               [k for k in spec_differences(run.spec, run.against.meta.spec)
+                if k not in CAUSAL_KNOBS])
+    same_mission = differs == [] and same_duration(rec, other)
+    rows = _orbit_marked([{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
+                          for r in comp.table], same_mission)
     flipped = sum(d.lag1 is not None and d.lag1 > LAG1_SMOOTH for d in other.directions)
     limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
@@ -223,8 +260,9 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
         "other_mode": damping_mode(other.theory), "limits": limits,
         "flipped": flipped, "n_directions": len(other.directions),
-        # The causal test's words: the same mission only where both flew it whole.
-        "same_mission": same_duration(rec, other),
+        # The causal test's words: the same mission only where the two specs differ in the
+        # step and the integrator alone (unknown without the other's log) and both flew it.
+        "same_mission": same_mission, "differs": differs,
         "seconds": (rec.n_steps * rec.dt, other.n_steps * other.dt),
         "fix_runs": fixes, "diag_D": np.diag(np.array(th.D_breve)).tolist(),
         "lag1_smooth": LAG1_SMOOTH, "ringing": ringing_words(rec),
@@ -236,7 +274,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "note_rows": table,
         "note_regimes": column_regimes(note_recs), "note_differences": differences(table),
         "fmt": fmt, "versions": versions,
-        "harm_rows": harm_table(rec, other),
+        "harm_rows": _orbit_marked(harm_table(rec, other), same_mission),
         # The pair's start-up and spectrum figures are drawn when both logs are there.
         "startup": against_log(run) is not None,
     }

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from pipeline.verify.checks_base import Outcome, check, maxdiff, rng
+from pipeline.verify.checks_base import Outcome, check, fmt, maxdiff, rng
 from pipeline.verify.checks_base import spec as check_spec
 
 
@@ -82,6 +82,23 @@ def _period2_amplitude() -> Outcome:
     ref = [a, 4 * math.sin(w / 2) ** 2 / math.sqrt(2) / 4]
     return Outcome("402 samples: an alternating 0.156 on a ramp, a sine of period 20 steps",
                    maxdiff(period2_amplitude(x), ref), 1e-12)
+
+
+@check("30", "short-period peak to peak (30b) of a(−1)^k on a ramp (reads 2a) and of a sine of "
+       "period 6 steps on a ramp (reads √3 A in closed form), whose period-2 amplitude is a "
+       "fraction of it", "pipeline.analysis.harm.short_period_peak_to_peak")
+def _short_period_peak_to_peak() -> Outcome:
+    from pipeline.analysis.harm import period2_amplitude, short_period_peak_to_peak
+
+    k = np.arange(600)
+    a, A = 0.156, 0.3
+    x = np.c_[a * (-1.0) ** k + 0.01 * k - 3.0, A * np.sin(2 * np.pi * k / 6) + 0.002 * k]
+    ref = np.array([2 * a, math.sqrt(3) * A])
+    p2 = period2_amplitude(x)[1]
+    return Outcome(f"600 samples: an alternating {a} and a sine of amplitude {A} over 6 steps, "
+                   f"each on a ramp; the sine's period-2 amplitude reads {fmt(p2)}",
+                   float(np.max(np.abs(short_period_peak_to_peak(x) - ref) / ref)), 1e-3,
+                   "relative difference")
 
 
 @check("31", "reversal share vs a loop counting sign changes; 1 for an alternating series, "
@@ -356,6 +373,7 @@ CHECKS = (
     _abs_cos,
     _velocity_jumps,
     _period2_amplitude,
+    _short_period_peak_to_peak,
     _reversal_share,
     _attitude_jitter,
     _roll_smear,
