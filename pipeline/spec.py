@@ -419,9 +419,10 @@ UNSET_FIELDS = (("robot", "locked_joints", {}), ("controller", "null_space", Non
                 ("mission.plant", "sensors", None), ("mission.plant", "timing", None))
 
 
-def spec_hash_of(content: dict[str, Any]) -> str:
-    """The spec hash of a spec's content (a resolved spec as JSON): the canonical hash of all
-    of it but its name, its description and the ``INERT_FIELDS``."""
+def hashed_content(content: dict[str, Any]) -> dict[str, Any]:
+    """What the spec hash reads of a spec's content (a resolved spec as JSON): all of it but
+    its name, its description, the ``INERT_FIELDS`` and the ``UNSET_FIELDS`` at their unset
+    value."""
     d = {k: v for k, v in content.items() if k not in ("name", "description")}
     for block, key in INERT_FIELDS:
         if isinstance(d.get(block), dict):
@@ -430,7 +431,24 @@ def spec_hash_of(content: dict[str, Any]) -> str:
     # is unchanged.
     for block, key, unset in UNSET_FIELDS:
         _drop_unset(d, block.split("."), key, unset)
-    return canonical_hash(d)
+    return d
+
+
+def spec_hash_of(content: dict[str, Any]) -> str:
+    """The spec hash of a spec's content: the canonical hash of its ``hashed_content``."""
+    return canonical_hash(hashed_content(content))
+
+
+def spec_differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """The dotted keys at which two resolved specs differ, as the spec hash reads them (a
+    field a run does not depend on, or one unset, is no difference), sorted."""
+    def walk(x: Any, y: Any, prefix: str) -> list[str]:
+        if isinstance(x, dict) and isinstance(y, dict):
+            return [k for key in sorted(set(x) | set(y))
+                    for k in walk(x.get(key), y.get(key), f"{prefix}{key}.")]
+        return [] if x == y else [prefix[:-1]]
+
+    return walk(hashed_content(a), hashed_content(b), "")
 
 
 def _drop_unset(d: dict, path: list[str], key: str, unset: Any) -> None:

@@ -52,7 +52,10 @@ def write_spec(folder: Path, name: str, parent: str, **extra: str) -> Path:
 def analyse_pair(log: Path, against: Path | None, out: Path) -> AnalysisRecord:
     record = analyze_log(verify_log(log))
     if against is not None:
-        record = replace(record, comparison=compare(record, analyze_log(verify_log(against))))
+        other = verify_log(against)
+        record = replace(record, comparison=compare(record, analyze_log(other),
+                                                    verify_log(log).meta.spec,
+                                                    other.meta.spec))
     write_analysis(record, out)
     return record
 

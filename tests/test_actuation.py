@@ -152,18 +152,26 @@ def test_a_six_step_cycle_is_seen_whole_by_the_short_period_peak_to_peak():
     q = np.c_[np.zeros((n, 3)), quat, np.zeros((n, 6))]
     u = np.zeros((n, 12))
     u[:, 5] = T * wave + 0.01  # τ_b about z_b, on a bias
+    u[:, 3] = 0.04 * (-1.0) ** k  # a small period-2 ripple about x_b
     h = harm(u, np.zeros((n, 12)), q, np.zeros(n), 0.03)
-    assert h.bus_torque.channel == "z_b"
+    # The period-2 figures pick x_b and read a fraction of the z_b cycle; eq. 30b finds it.
+    assert h.bus_torque.channel == "x_b"
+    assert h.bus_torque.short_period_channel == "z_b"
     assert h.bus_torque.short_period_peak_to_peak == pytest.approx(np.sqrt(3) * T, rel=1e-3)
-    assert h.bus_torque.period2_amplitude < 0.2 * T
+    assert period2_amplitude(u[:, 5]) < 0.2 * T
     # The largest bus axis: the tilted axis' largest component carries that share of it.
-    assert h.attitude.short_period_deg == pytest.approx(
+    assert h.attitude.short_period_peak_to_peak_deg == pytest.approx(
         np.degrees(np.sqrt(3) * A * axis.max()), rel=1e-3)
     assert h.attitude.at_instants_deg < 0.2 * np.degrees(A)
+    # A held torque's cycle between the instants (excursion ε, the instants still): 2ε.
+    still = np.c_[np.zeros((n, 3)), Rotation.identity(n).as_quat(), np.zeros((n, 6))]
+    arcs = harm(u, np.zeros((n, 12)), still, np.full(n, 0.05), 0.03).attitude
+    assert arcs.short_period_peak_to_peak_deg == pytest.approx(0.1, abs=1e-12)
     # Too short a window for the band's filter: no figure rather than a wrong one.
     short = harm(u[:100], np.zeros((100, 12)), q[:100], np.zeros(100), 0.03)
     assert short.bus_torque.short_period_peak_to_peak is None
-    assert short.attitude.short_period_deg is None
+    assert short.bus_torque.short_period_channel is None
+    assert short.attitude.short_period_peak_to_peak_deg is None
 
 
 @pytest.mark.parametrize(("name", "mode"), [

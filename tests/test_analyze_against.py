@@ -51,7 +51,9 @@ def test_against_states_robot_dt_duration_and_windows(logs, tmp_path, capsys):
     assert "note: different windows" in text
     # Coverage grows along the orbit: runs of different lengths have no coverage difference.
     assert rec["comparison"]["coverage_diff_pp"] is None
-    assert "coverage difference not compared (different durations)" in text
+    assert rec["comparison"]["mission_differs"] == ["mission.duration"]
+    assert "coverage difference not compared (another mission)" in text
+    assert "note: the specs also differ in mission.duration" in text
 
 
 def test_against_names_no_difference_when_durations_agree(logs, tmp_path, capsys):
@@ -65,6 +67,7 @@ def test_against_names_no_difference_when_durations_agree(logs, tmp_path, capsys
     assert "tests neither the step nor the integrator" in text
     rec = _record(tmp_path, "a_nominal")
     assert rec["comparison"]["coverage_diff_pp"] == 0.0 and "coverage difference 0.00 pp" in text
+    assert rec["comparison"]["mission_differs"] == [] and "specs also differ" not in text
 
 
 def test_against_another_robot_is_refused(logs, tmp_path, capsys):

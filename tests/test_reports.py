@@ -185,11 +185,12 @@ def test_mechanism_report_numbers_come_from_analysis_json():
     assert "imex" in imex and "keeps every mode stable" in imex
 
 
-def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
+def test_a_pair_of_another_mission_is_not_called_the_same_mission(tmp_path):
     """The fixture's pair differs in the step alone: the same mission, coverage compared. The
-    same pair with the other run flown half as long: both durations named, the orbit's rows
-    marked, coverage not compared (it grows along the orbit); with no r₁ flip the report does
-    not call the flip the dt-independent evidence."""
+    same pair as if the other run had flown half as long, or from another posture: the keys
+    named (and both durations where they differ), the orbit's rows marked, coverage not
+    compared (it grows along the orbit and depends on the posture); with no r₁ flip the
+    report does not call the flip the dt-independent evidence."""
     from dataclasses import replace
 
     from pipeline.reports.mechanism import mechanism_context
@@ -201,32 +202,25 @@ def test_a_pair_of_different_durations_is_not_called_the_same_mission(tmp_path):
     runs = load_runs(b.reports)
     run = next(r for r in runs if r.name == "t_nominal")
     comp = run.record.comparison
-    assert comp.coverage_diff_pp is not None
-    shorter = replace(comp.other, n_steps=comp.other.n_steps // 2)
-    run = replace(run, record=replace(run.record, comparison=replace(
-        comp, other=shorter, coverage_diff_pp=None, lag1_flip=False)))
-    ctx = mechanism_context(run, runs)
-    md = render("mechanism.md.j2", tmp_path / "m.md", **ctx).read_text()
-    html = render("mechanism.html.j2", tmp_path / "m.html", **ctx).read_text()
-    seconds = (run.record.n_steps * run.record.dt, shorter.n_steps * shorter.dt)
-    assert "runs the same mission" not in md
-    assert f"for {seconds[1]:.4g} s, this run for {seconds[0]:.4g} s" in md
-    assert "Coverage differs" not in md + html
-    assert md.count("Coverage is not compared: another mission") == 1
-    assert md.count("final coverage (another mission: not compared)") == 2  # §4 and §7
-    assert "the r₁ flip is the dt-independent evidence" not in md
-
-
-def test_spec_differences_name_every_dotted_key_but_the_name_and_description():
-    from pipeline.reports.mechanism import spec_differences
-
-    a = {"name": "a", "description": "x", "mission": {"dt": 0.03, "duration": 60.0},
-         "robot": {"q_bar": [0.0, 1.0]}, "controller": {"integrator": "explicit"}}
-    b = {"name": "b", "description": "y", "mission": {"dt": 0.01, "duration": 60.0},
-         "robot": {"q_bar": [0.0, 1.5]}, "controller": {"integrator": "explicit"},
-         "extra": 1}
-    assert spec_differences(a, b) == ["extra", "mission.dt", "robot.q_bar"]
-    assert spec_differences(a, a) == []
+    assert comp.coverage_diff_pp is not None and comp.mission_differs == []
+    seconds = run.record.n_steps * run.record.dt
+    for other, differs, flew in (
+            (replace(comp.other, n_steps=comp.other.n_steps // 2), ["mission.duration"],
+             f"; it flew {seconds / 2:.4g} s, this run {seconds:.4g} s"),
+            (comp.other, ["robot.q_bar"], "")):
+        changed = replace(run, record=replace(run.record, comparison=replace(
+            comp, other=other, mission_differs=differs, coverage_diff_pp=None,
+            lag1_flip=False)))
+        ctx = mechanism_context(changed, runs)
+        md = render("mechanism.md.j2", tmp_path / "m.md", **ctx).read_text()
+        html = render("mechanism.html.j2", tmp_path / "m.html", **ctx).read_text()
+        assert "runs the same mission" not in md
+        assert f"another mission: the specs also differ in {differs[0]}{flew}; their orbit" in md
+        assert ("it flew" in md) == bool(flew)
+        assert "Coverage differs" not in md + html
+        assert md.count("Coverage is not compared: another mission") == 1
+        assert md.count("final coverage (another mission: not compared)") == 2  # §4 and §7
+        assert "the r₁ flip is the dt-independent evidence" not in md
 
 
 def test_cross_check_markdown_has_a_row_per_equation_with_file_and_line():

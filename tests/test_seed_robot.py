@@ -353,8 +353,9 @@ def test_reports_render_a_diverged_run_beside_a_pair(tmp_path):
     dt010 = with_overrides(load_spec("omega_ripple_dt010"), {"mission.duration": 6.0},
                            name="d6")
     a, b = run_spec(spec, logs).path, run_spec(dt010, logs).path
-    rec = analyze_log(verify_log(a))
-    rec = replace(rec, comparison=compare(rec, analyze_log(verify_log(b))))
+    la, lb = verify_log(a), verify_log(b)
+    rec = analyze_log(la)
+    rec = replace(rec, comparison=compare(rec, analyze_log(lb), la.meta.spec, lb.meta.spec))
     write_analysis(rec, out)
     render_all(out)
     index = (out / "index.html").read_text()

@@ -384,3 +384,19 @@ def test_a_posture_outside_a_joints_range_is_refused_naming_it(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "field robot.q_bar: wrist_1_joint at 1 rad is outside its " \
         "range" in lines[0], lines
+
+
+def test_spec_differences_read_the_specs_as_their_hash_does():
+    """Dotted keys, sorted; a name, a description, an inert field or an unset one at its
+    unset value is no difference (the spec hash ignores them)."""
+    from pipeline.spec import spec_differences
+
+    a = {"name": "a", "description": "x", "mission": {"dt": 0.03, "duration": 60.0,
+                                                      "initial_omega_b": [0.0, 0.0, 0.0]},
+         "robot": {"q_bar": [0.0, 1.0]}, "config_sampling": {"low": 1.0}}
+    b = {"name": "b", "description": "y", "mission": {"dt": 0.01, "duration": 60.0},
+         "robot": {"q_bar": [0.0, 1.5]}, "config_sampling": {"low": 2.0}, "extra": 1}
+    assert spec_differences(a, b) == ["extra", "mission.dt", "robot.q_bar"]
+    assert spec_differences(a, a) == []
+    assert spec_differences(a, {**a, "mission": {**a["mission"], "initial_omega_b": [0, 0, 1]}}
+                            ) == ["mission.initial_omega_b"]

@@ -22,11 +22,12 @@ reversals per second).
   amplitude between them. The sum is the continuous attitude's period-2 amplitude in both
   cases, and a bound on it otherwise;
 - short-period peak to peak (eq. 30b): max − min of a series' short-period part (eq. 36's
-  band, periods up to ``BAND_STEPS``), for the torque and for the bus attitude at the
-  instants (θ_k = Σ_{j<k} δ_j, the bus frame's rotations summed, per axis). A period-2
-  amplitude reads a period-2 cycle only: the relay cycle of a delayed loop, over some six
-  steps, moves the bus several times more than its period-2 part says, and this statistic
-  sees it (a period-2 cycle of amplitude a reads 2a).
+  band, periods up to ``BAND_STEPS``), largest over the torque's channels, and for the bus
+  attitude at the instants (θ_k = Σ_{j<k} δ_j, the bus frame's rotations summed, per axis)
+  plus twice the largest excursion between them. A period-2 amplitude reads a period-2 cycle
+  only: the relay cycle of a delayed loop, over some six steps, moves the bus several times
+  more than its period-2 part says, and this statistic sees it (a period-2 cycle of
+  amplitude a reads 2a).
 """
 
 from __future__ import annotations
@@ -48,8 +49,11 @@ class ChannelHarm:
     rms: float  # RMS over the window of the channels' norm
     channel: str  # the channel of largest period-2 amplitude
     period2_amplitude: float  # its a = RMS(Δ²x)/4 (eq. 30)
-    # its short-period part's peak to peak (eq. 30b); None: a window too short to judge
+    # The largest short-period peak to peak over the channels (eq. 30b) and its channel, which
+    # a cycle longer than two steps may put elsewhere; None: a window too short to judge, or
+    # not finite.
     short_period_peak_to_peak: float | None
+    short_period_channel: str | None
     reversal_share: float  # its share of sign reversals between consecutive steps (eq. 31)
     reversals_per_s: float  # reversal_share / dt
 
@@ -63,9 +67,10 @@ class AttitudeHarm:
     at_instants_deg: float
     between_instants_deg: float
     step_deg_median: float  # the median rotation of the bus over one step
-    # the attitude's short-period part at the instants, peak to peak, largest over the bus
-    # axes (eq. 30b); None: a window too short to judge
-    short_period_deg: float | None
+    # The attitude's short-period peak to peak (eq. 30b): at the instants, largest over the bus
+    # axes, plus twice the largest excursion between them (the continuous attitude's, or a
+    # bound on it, as eq. 32's jitter); None: a window too short to judge, or not finite.
+    short_period_peak_to_peak_deg: float | None
 
 
 @dataclass(frozen=True)
@@ -108,10 +113,12 @@ def channel_harm(x: np.ndarray, dt: float, names: tuple[str, ...]) -> ChannelHar
     amp = period2_amplitude(x)
     i = int(np.argmax(amp))
     share = float(reversal_share(x[:, i]))
-    pp = short_period_peak_to_peak(x[:, i])
+    pp = short_period_peak_to_peak(x)
+    j = None if pp is None else int(np.argmax(pp))
     return ChannelHarm(rms=float(np.sqrt(np.mean(np.sum(x * x, axis=1)))), channel=names[i],
                        period2_amplitude=float(amp[i]),
-                       short_period_peak_to_peak=None if pp is None else float(pp),
+                       short_period_peak_to_peak=None if j is None else float(pp[j]),
+                       short_period_channel=None if j is None else names[j],
                        reversal_share=share, reversals_per_s=share / dt)
 
 
@@ -144,9 +151,12 @@ def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.
     delta = attitude_steps(q[:, Q.quat_tb])
     steps = np.degrees(np.linalg.norm(delta, axis=1))
     # The attitude at the instants from the steps' rotations summed: exact about a fixed
-    # axis, and off by products of the slow turn and the ripple otherwise.
+    # axis, and off by products of the slow turn and the ripple otherwise; the motion between
+    # the instants (a held torque's arcs) adds at most twice its largest excursion.
     theta = np.vstack([np.zeros(3), np.cumsum(delta, axis=0)])
     pp = short_period_peak_to_peak(theta)
+    pp_deg = (None if pp is None or not np.all(np.isfinite(between)) else
+              float(np.degrees(pp.max()) + 2.0 * between.max()))
     return Harm(bus_torque=channel_harm(u_applied[:, U.tau_b], dt, BUS_TORQUE_AXES),
                 joint_torque=channel_harm(u_applied[:, U.joints], dt, joints),
                 joint_rate=channel_harm(v[:, V.joints], dt, joints),
@@ -154,8 +164,7 @@ def harm(u_applied: np.ndarray, v: np.ndarray, q: np.ndarray, excursion_deg: np.
                                       at_instants_deg=_rms(at_instants),
                                       between_instants_deg=_rms(between),
                                       step_deg_median=float(np.median(steps)),
-                                      short_period_deg=(None if pp is None else
-                                                        float(np.degrees(pp.max())))))
+                                      short_period_peak_to_peak_deg=pp_deg))
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,9 @@ from pipeline.errors import LogError
 # /9: joint_ranges, the run's time outside the arm's joint ranges (eq. 42), and
 # theory.s_min_G_target where the step was chosen nearest a σ_min(Γ) (issue 50); /10:
 # prediction.agrees null when undetermined (never false), with undetermined_why and
-# least_mission_steps, and each ring's own reason (Ring.undetermined) (issue 51).
+# least_mission_steps, and each ring's own reason (Ring.undetermined) (issue 51); /11: the
+# short-period peak to peak of the bus torque (with its channel) and of the bus attitude (eq.
+# 30b), and a comparison's mission_differs, its coverage difference null for another mission.
 SCHEMA = "breve-analysis/11"
 CONTENT_KEY = "record_sha256"
 RECORD_NAME = ANALYSIS_FILE

@@ -341,14 +341,17 @@ def same_duration(a: Identity, b: Identity) -> bool:
 @dataclass(frozen=True)
 class Comparison:
     """Stage 7: this run against another of the same robot (``other``: its whole record, as
-    analysed, without the fields only a written record has). ``coverage_diff_pp`` is None
-    when the two flew different durations (:func:`same_duration`): coverage grows along the
-    orbit, so the difference would measure the lengths, not the ripple."""
+    analysed, without the fields only a written record has). ``mission_differs``: the keys at
+    which the two resolved specs differ besides the step and the integrator, the knobs a
+    causal test varies (empty: the same mission). ``coverage_diff_pp`` is None unless both
+    flew the same mission whole (:func:`same_duration`): coverage grows along the orbit and
+    depends on the posture, so another mission's would measure those, not the ripple."""
 
     against: str
     against_log: str
     lag1_flip: bool
     amplitude_ratio: float
+    mission_differs: list[str]
     coverage_diff_pp: float | None
     table: list[dict[str, Any]]
     other: CompleteRecord

@@ -41,7 +41,7 @@ from pipeline.sim.stability import (
     mode_stiffness,
     position_jacobian,
 )
-from pipeline.spec import Spec
+from pipeline.spec import Spec, spec_differences
 
 REQUIRED = ["step", "t", "q", "v", "s_min_G", "kappa_G", "s_min_J", "x_tilde", "dt_mu_max",
             "pointing_err_deg", "boresight_err_deg", "coverage", "u_applied",
@@ -664,24 +664,34 @@ COMPARE_ROWS = (
     ("joint torque: period-2 amplitude (N·m)", ("harm", "joint_torque", "period2_amplitude")),
     ("joint rate: reversals per second", ("harm", "joint_rate", "reversals_per_s")),
     ("bus attitude jitter (deg)", ("harm", "attitude", "jitter_deg")),
-    ("bus attitude: short-period peak to peak at the instants (deg)",
-     ("harm", "attitude", "short_period_deg")),
+    ("bus attitude: short-period peak to peak (deg)",
+     ("harm", "attitude", "short_period_peak_to_peak_deg")),
     ("max pointing error (deg)", ("metrics", "pointing_err_deg_max")),
     ("final coverage", ("metrics", "coverage_final")),
 )
 
 
-def compare(a: rs.CompleteRecord, b: rs.CompleteRecord) -> rs.Comparison:
-    """Stage 7: the two runs side by side, the lag-1 flip and the amplitude ratio. ``b`` is
-    kept whole, as analysed (the fields only a written record has are dropped)."""
+# What a causal test varies between its two runs (eq. 24's step, eq. 15's integrator); any
+# other difference of their specs makes the other run another mission.
+CAUSAL_KNOBS = ("mission.dt", "controller.integrator")
+
+
+def compare(a: rs.CompleteRecord, b: rs.CompleteRecord, spec_a: dict, spec_b: dict
+            ) -> rs.Comparison:
+    """Stage 7: the two runs side by side, the lag-1 flip and the amplitude ratio, and what
+    else their resolved specs ``spec_a`` and ``spec_b`` (the logs') differ in. ``b`` is kept
+    whole, as analysed (the fields only a written record has are dropped)."""
     la, lb = a.dominant.lag1, b.dominant.lag1
+    differs = [k for k in spec_differences(spec_a, spec_b) if k not in CAUSAL_KNOBS]
+    same_mission = not differs and rs.same_duration(a, b)
     return rs.Comparison(
         against=b.spec_name, against_log=b.log,
         # An undetermined lag-1 flips nothing: the sign of no motion is no evidence.
         lag1_flip=la is not None and lb is not None and bool(np.sign(la) != np.sign(lb)),
         amplitude_ratio=a.velocity_jump.median / b.velocity_jump.median,
+        mission_differs=differs,
         coverage_diff_pp=(100 * abs(a.metrics.coverage_final - b.metrics.coverage_final)
-                          if rs.same_duration(a, b) else None),
+                          if same_mission else None),
         table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}
                for label, p in COMPARE_ROWS],
         other=replace(b, schema=None, record_sha256=None, directions_sha256=None,

@@ -41,6 +41,9 @@ def basis_lines(a: CompleteRecord, b: CompleteRecord) -> list[str]:
         lines.append(f"  note: different durations ({da:.4g} s vs {db:.4g} s)")
     if abs(sa - sb) > step or abs(ea - eb) > step:
         lines.append(f"  note: different windows ({sa:.4g}–{ea:.4g} s vs {sb:.4g}–{eb:.4g} s)")
+    differs = a.comparison.mission_differs if a.comparison is not None else []
+    if differs:
+        lines.append(f"  note: the specs also differ in {', '.join(differs)}")
     return lines
 
 
@@ -74,7 +77,7 @@ def summary_lines(record: AnalysisRecord, path: Path) -> list[str]:
                      f"earliest arrival {lat.earliest_radius:.6g}); {lat.verdict}")
     if record.comparison is not None:
         c = record.comparison
-        coverage = ("not compared (different durations)" if c.coverage_diff_pp is None
+        coverage = ("not compared (another mission)" if c.coverage_diff_pp is None
                     else f"{c.coverage_diff_pp:.2f} pp")
         lines.append(f"  vs {c.against}: lag-1 flip {c.lag1_flip}, ‖Δv‖ ratio "
                      f"{c.amplitude_ratio:.3g}, coverage difference {coverage}")

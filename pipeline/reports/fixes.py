@@ -174,17 +174,18 @@ def severity(rec: CompleteRecord, spec: dict) -> str:
              f"; camera roll smear {c.smear_px:.3g} px at the image corner "
              f"({c.resolution_px} px, {c.fov_deg:g}° field of view)")
     # The short-period peak to peak (eq. 30b) sees a cycle of any period the ring detector
-    # judges; the period-2 figures, a delayed loop's longer cycle only in part.
-    torque_pp = ("" if h.bus_torque.short_period_peak_to_peak is None else
-                 f", {h.bus_torque.short_period_peak_to_peak:.3g} N·m peak to peak over the "
-                 f"short periods")
-    attitude_pp = ("" if h.attitude.short_period_deg is None else
-                   f"; the bus attitude moves {h.attitude.short_period_deg:.3g}° peak to peak "
-                   f"over the short periods at the control instants")
-    return (f"the bus torque reverses {h.bus_torque.reversals_per_s:.3g} times a second about "
-            f"{h.bus_torque.channel} at a period-2 amplitude of "
-            f"{h.bus_torque.period2_amplitude:.3g} N·m{torque_pp} ({against}); bus attitude "
-            f"jitter (period-2) {h.attitude.jitter_deg:.3g}°{attitude_pp}{smear}")
+    # judges; the period-2 figures, amplitudes, a delayed loop's longer cycle only in part.
+    bt, at = h.bus_torque, h.attitude
+    torque_pp = ("" if bt.short_period_peak_to_peak is None else
+                 f"; over the short periods {bt.short_period_peak_to_peak:.3g} N·m peak to peak "
+                 f"about {bt.short_period_channel}")
+    attitude_pp = ("" if at.short_period_peak_to_peak_deg is None else
+                   f"; over the short periods {at.short_period_peak_to_peak_deg:.3g}° peak to "
+                   f"peak")
+    return (f"the bus torque reverses {bt.reversals_per_s:.3g} times a second about "
+            f"{bt.channel} at a period-2 amplitude of {bt.period2_amplitude:.3g} N·m"
+            f"{torque_pp} ({against}); the bus attitude's period-2 jitter (amplitude) "
+            f"{at.jitter_deg:.3g}°{attitude_pp}{smear}")
 
 
 def _change(a: RunData, b: RunData) -> str:

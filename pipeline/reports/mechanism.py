@@ -145,7 +145,8 @@ HARM_ROWS = (
     ("bus torque, period-2 amplitude", "N·m", ("harm", "bus_torque", "period2_amplitude"),
      ("harm", "bus_torque", "channel")),
     ("bus torque, short-period peak to peak (eq. 30b)", "N·m",
-     ("harm", "bus_torque", "short_period_peak_to_peak"), ("harm", "bus_torque", "channel")),
+     ("harm", "bus_torque", "short_period_peak_to_peak"),
+     ("harm", "bus_torque", "short_period_channel")),
     ("bus torque, reversal share", "", ("harm", "bus_torque", "reversal_share"),
      ("harm", "bus_torque", "channel")),
     ("bus torque, reversals per second", "1/s", ("harm", "bus_torque", "reversals_per_s"),
@@ -161,8 +162,9 @@ HARM_ROWS = (
     ("bus attitude jitter", "deg", ("harm", "attitude", "jitter_deg"), None),
     ("… at the control instants", "deg", ("harm", "attitude", "at_instants_deg"), None),
     ("… between them", "deg", ("harm", "attitude", "between_instants_deg"), None),
-    ("bus attitude at the instants, short-period peak to peak (eq. 30b)", "deg",
-     ("harm", "attitude", "short_period_deg"), None),
+    ("bus attitude, short-period peak to peak (eq. 30b: at the instants, plus twice the "
+     "largest excursion between them)", "deg",
+     ("harm", "attitude", "short_period_peak_to_peak_deg"), None),
 )
 
 
@@ -171,7 +173,8 @@ def harm_table(rec: CompleteRecord, other: CompleteRecord) -> list[dict]:
     channel it was measured on."""
     def cell(r: CompleteRecord, path, channel) -> str:
         value = num(value_at(r, path))
-        return f"{value} ({value_at(r, channel)})" if channel else value
+        where = value_at(r, channel) if channel else None
+        return f"{value} ({where})" if where is not None else value
 
     return [{"quantity": f"{label} ({unit})" if unit else label,
              "a": cell(rec, path, channel), "b": cell(other, path, channel)}
@@ -199,27 +202,8 @@ def note_rows(records: dict[str, CompleteRecord], claims: dict | None = None) ->
     return note_table(load_note(NOTE_FILE), records, claims["claims"] if claims else None)
 
 
-# What a causal test varies between its two runs; any other difference between their specs
-# (a posture, a duration, a gain) makes the other run another mission, whose coverage and
-# pointing do not compare with this one's.
-CAUSAL_KNOBS = ("mission.dt", "controller.integrator")
 # The rows of the orbit's quantities, in the evidence table (stage 7's) and the harm table.
 ORBIT_ROWS = ("max pointing error (deg)", "final coverage", "max z_b pointing error (deg)")
-
-
-def spec_differences(a: dict, b: dict, prefix: str = "") -> list[str]:
-    """The dotted keys at which two resolved specs differ, their names and descriptions
-    aside."""
-    out = []
-    for key in sorted(set(a) | set(b)):
-        if not prefix and key in ("name", "description"):
-            continue
-        va, vb = a.get(key), b.get(key)
-        if isinstance(va, dict) and isinstance(vb, dict):
-            out += spec_differences(va, vb, f"{prefix}{key}.")
-        elif va != vb:
-            out.append(f"{prefix}{key}")
-    return out
 
 
 def _orbit_marked(rows: list[dict], same_mission: bool) -> list[dict]:
@@ -236,10 +220,10 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     other = comp.other
     th = rec.theory
     names = (rec.spec_name, other.spec_name)
-    differs = (None if run.against is None else
-               [k for k in spec_differences(run.spec, run.against.meta.spec)
-                if k not in CAUSAL_KNOBS])
-    same_mission = differs == [] and same_duration(rec, other)
+    # The same mission: the specs differ in the step and the integrator alone (stage 7), and
+    # both flew it whole.
+    differs = comp.mission_differs
+    same_mission = not differs and same_duration(rec, other)
     rows = _orbit_marked([{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
                           for r in comp.table], same_mission)
     flipped = sum(d.lag1 is not None and d.lag1 > LAG1_SMOOTH for d in other.directions)
@@ -260,8 +244,6 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
         "other_mode": damping_mode(other.theory), "limits": limits,
         "flipped": flipped, "n_directions": len(other.directions),
-        # The causal test's words: the same mission only where the two specs differ in the
-        # step and the integrator alone (unknown without the other's log) and both flew it.
         "same_mission": same_mission, "differs": differs,
         "seconds": (rec.n_steps * rec.dt, other.n_steps * other.dt),
         "fix_runs": fixes, "diag_D": np.diag(np.array(th.D_breve)).tolist(),

@@ -340,7 +340,8 @@ class ArtefactStore:
         if against is not None:
             other = (against_record if against_record is not None and window_start is None
                      else analyze_log(against, window_start))
-            record = replace(record, comparison=compare(record, other))
+            record = replace(record, comparison=compare(record, other, log.meta.spec,
+                                                        against.meta.spec))
         return record
 
 
