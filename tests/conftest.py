@@ -165,10 +165,13 @@ def pytest_collection_finish(session):
     if session.config.option.collectonly or not session.items:
         return
     t0 = time.monotonic()
+    from pipeline.compile import STAMP  # the compile stage's stamp file
+
     cache = _kernel_cache()
-    # Nothing there at all (a cache with a stamp and no kernels is not an empty one).
-    cold = (not os.environ.get("NUMBA_DISABLE_JIT")
-            and not (cache.is_dir() and any(cache.iterdir())))
+    # No kernel and no compile stamp (importing the package makes Numba's empty folders;
+    # a stamp without kernels would make the compile a no-op and the copy empty).
+    cold = (not os.environ.get("NUMBA_DISABLE_JIT") and not (cache / STAMP).exists()
+            and not any(cache.rglob("*.nb[ic]")))
     r = subprocess.run([sys.executable, "-m", "pipeline", "compile"], cwd=PROJECT_ROOT,
                        capture_output=True, text=True, timeout=900)
     lines = r.stderr.strip().splitlines() or ["compile: (no output)"]
