@@ -338,6 +338,13 @@ def same_duration(a: Identity, b: Identity) -> bool:
     return abs(a.n_steps * a.dt - b.n_steps * b.dt) <= max(a.dt, b.dt)
 
 
+def same_mission(a: Identity, b: Identity, differs: list[str]) -> bool:
+    """Whether two runs flew the same mission: their specs differ in the knobs of a causal
+    test alone (``differs``: the other keys, stage 7's ``mission_differs``) and both flew it
+    whole (:func:`same_duration`)."""
+    return not differs and same_duration(a, b)
+
+
 @dataclass(frozen=True)
 class Comparison:
     """Stage 7: this run against another of the same robot (``other``: its whole record, as

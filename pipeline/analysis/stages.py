@@ -683,7 +683,6 @@ def compare(a: rs.CompleteRecord, b: rs.CompleteRecord, spec_a: dict, spec_b: di
     whole, as analysed (the fields only a written record has are dropped)."""
     la, lb = a.dominant.lag1, b.dominant.lag1
     differs = [k for k in spec_differences(spec_a, spec_b) if k not in CAUSAL_KNOBS]
-    same_mission = not differs and rs.same_duration(a, b)
     return rs.Comparison(
         against=b.spec_name, against_log=b.log,
         # An undetermined lag-1 flips nothing: the sign of no motion is no evidence.
@@ -691,7 +690,7 @@ def compare(a: rs.CompleteRecord, b: rs.CompleteRecord, spec_a: dict, spec_b: di
         amplitude_ratio=a.velocity_jump.median / b.velocity_jump.median,
         mission_differs=differs,
         coverage_diff_pp=(100 * abs(a.metrics.coverage_final - b.metrics.coverage_final)
-                          if same_mission else None),
+                          if rs.same_mission(a, b, differs) else None),
         table=[{"quantity": label, a.spec_name: value_at(a, p), b.spec_name: value_at(b, p)}
                for label, p in COMPARE_ROWS],
         other=replace(b, schema=None, record_sha256=None, directions_sha256=None,

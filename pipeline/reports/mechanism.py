@@ -15,6 +15,7 @@ from pipeline.analysis.schema import (
     CompleteRecord,
     Theory,
     same_duration,
+    same_mission,
     value_at,
 )
 from pipeline.claims.seed_note import (
@@ -206,10 +207,10 @@ def note_rows(records: dict[str, CompleteRecord], claims: dict | None = None) ->
 ORBIT_ROWS = ("max pointing error (deg)", "final coverage", "max z_b pointing error (deg)")
 
 
-def _orbit_marked(rows: list[dict], same_mission: bool) -> list[dict]:
+def _orbit_marked(rows: list[dict], same: bool) -> list[dict]:
     """The rows, the orbit's quantities marked where the pair flew different missions."""
     return [{**r, "quantity": f"{r['quantity']} (another mission: not compared)"}
-            if not same_mission and r["quantity"] in ORBIT_ROWS else r for r in rows]
+            if not same and r["quantity"] in ORBIT_ROWS else r for r in rows]
 
 
 def mechanism_context(run: RunData, others: list[RunData], claims: dict | None = None) -> dict:
@@ -220,12 +221,10 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
     other = comp.other
     th = rec.theory
     names = (rec.spec_name, other.spec_name)
-    # The same mission: the specs differ in the step and the integrator alone (stage 7), and
-    # both flew it whole.
     differs = comp.mission_differs
-    same_mission = not differs and same_duration(rec, other)
+    same = same_mission(rec, other, differs)
     rows = _orbit_marked([{"quantity": r["quantity"], "a": r[names[0]], "b": r[names[1]]}
-                          for r in comp.table], same_mission)
+                          for r in comp.table], same)
     flipped = sum(d.lag1 is not None and d.lag1 > LAG1_SMOOTH for d in other.directions)
     limits = sorted(((k, v) for k, v in rec.metrics.limit_share.items() if v > 0),
                     key=lambda kv: -kv[1])
@@ -244,7 +243,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "rows": rows, "verdict": verdict(rec, other), "mode": damping_mode(th),
         "other_mode": damping_mode(other.theory), "limits": limits,
         "flipped": flipped, "n_directions": len(other.directions),
-        "same_mission": same_mission, "differs": differs,
+        "same_mission": same, "differs": differs, "same_length": same_duration(rec, other),
         "seconds": (rec.n_steps * rec.dt, other.n_steps * other.dt),
         "fix_runs": fixes, "diag_D": np.diag(np.array(th.D_breve)).tolist(),
         "lag1_smooth": LAG1_SMOOTH, "ringing": ringing_words(rec),
@@ -256,7 +255,7 @@ def mechanism_context(run: RunData, others: list[RunData], claims: dict | None =
         "note_rows": table,
         "note_regimes": column_regimes(note_recs), "note_differences": differences(table),
         "fmt": fmt, "versions": versions,
-        "harm_rows": _orbit_marked(harm_table(rec, other), same_mission),
+        "harm_rows": _orbit_marked(harm_table(rec, other), same),
         # The pair's start-up and spectrum figures are drawn when both logs are there.
         "startup": against_log(run) is not None,
     }

@@ -59,6 +59,14 @@ def val(x) -> str:
     return num(x)
 
 
+def complex_num(z) -> str:
+    """A complex value (``Complex``: real, imag) as ``num`` writes its parts: the real part,
+    then the imaginary one with its sign, none when it is zero."""
+    if not z.imag:
+        return num(z.real)
+    return f"{num(z.real)} {'+' if z.imag > 0 else '−'} {num(abs(z.imag))}j"
+
+
 _TAGLIKE = re.compile(r"<[A-Za-z/!?]")
 
 
@@ -95,8 +103,8 @@ def environment() -> Environment:
                       keep_trailing_newline=True)
     from pipeline.analysis.verdict import measured_words
 
-    env.filters.update(num=num, sci=sci, cell=cell, href=href, val=val, rel=rel,
-                       first_sentence=first_sentence, measured_words=measured_words)
+    env.filters.update(num=num, complex_num=complex_num, sci=sci, cell=cell, href=href, val=val,
+                       rel=rel, first_sentence=first_sentence, measured_words=measured_words)
     return env
 
 
